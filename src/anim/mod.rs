@@ -1,0 +1,2 @@
+//! Animation: key postures, splines, timelines, IK and baking (skeleton motions independent of
+//! the deformation model).

@@ -1,0 +1,1 @@
+//! The application: the frame loop and its scheduler, app state and undoable edit commands.

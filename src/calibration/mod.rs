@@ -1,0 +1,1 @@
+//! Screen calibration: the screen rectangle from measured corners, tracker frames, profiles.

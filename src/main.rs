@@ -1,0 +1,52 @@
+//! The `leman` command line: parses arguments and calls the library. One file per subcommand in
+//! `src/cmd/`.
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+
+/// leman: build and animate elastically deformable layered characters in head-tracked stereo.
+#[derive(Debug, Parser)]
+#[command(name = "leman", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Open the workstation on the default character (the default when no command is given).
+    Run(cmd::run::Args),
+    /// List serial ports and HID devices, marking supported trackers and 3D mice.
+    Devices(cmd::devices::Args),
+    /// Record live devices into a session file until Ctrl-C.
+    Record(cmd::record::Args),
+    /// Decode a raw byte capture or a session with one protocol.
+    Decode(cmd::decode::Args),
+    /// Replay a recorded session through the whole app, in a window or headless.
+    Replay(cmd::replay::Args),
+    /// Screen calibration: touch the corners, fit from recorded corners, or check a profile.
+    Calibrate(cmd::calibrate::Args),
+    /// Run a character's simulation headless and print a Table-1 style report.
+    Simulate(cmd::simulate::Args),
+}
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command.unwrap_or(Command::Run(cmd::run::Args::default())) {
+        Command::Run(args) => cmd::run::run(args),
+        Command::Devices(args) => cmd::devices::run(args),
+        Command::Record(args) => cmd::record::run(args),
+        Command::Decode(args) => cmd::decode::run(args),
+        Command::Replay(args) => cmd::replay::run(args),
+        Command::Calibrate(args) => cmd::calibrate::run(args),
+        Command::Simulate(args) => cmd::simulate::run(args),
+    }
+}

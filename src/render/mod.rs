@@ -1,0 +1,1 @@
+//! Rendering with wgpu: scene drawing, stereo passes executing a composition, offscreen capture.

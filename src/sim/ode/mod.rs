@@ -1,0 +1,1 @@
+//! Integrators and step-size control shared by both deformation models.

@@ -1,0 +1,1 @@
+//! Stereo: eye positions from a head pose, off-axis projections, output (composition) modes.

@@ -1,0 +1,1 @@
+//! Tracking: pose filtering (One Euro) and prediction, tracker-to-world frames.

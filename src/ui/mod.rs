@@ -1,0 +1,1 @@
+//! egui panels of the workstation.
