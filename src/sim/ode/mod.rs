@@ -1,1 +1,561 @@
 //! Integrators and step-size control shared by both deformation models.
+//!
+//! Every integrator advances a second-order system `x'' = a(t, x, x')` held as flat `f32`
+//! slices (a model lays out its state however it likes, e.g. structure-of-arrays blocks
+//! `[x…, y…, z…]`). Time and step sizes are `f64` seconds so long runs do not lose time.
+//!
+//! An integrator only *proposes* a step: it writes the candidate state into caller buffers and
+//! says whether its own error control accepts it and which step to try next. The model then
+//! applies its constraints and guards and commits or rejects. This keeps constraint handling
+//! (LEMAN 4.2.3) and the blow-up guard outside the integrators, which stay testable on known
+//! problems (see the tests at the bottom of this file).
+//!
+//! The four methods (switchable between any two steps):
+//! - [`IntegratorKind::Euler`]: explicit (forward) Euler with a fixed step, first order.
+//! - [`IntegratorKind::Verlet`]: the adaptive leapfrog Verlet of LEMAN eq. 7-12, second order,
+//!   with a fixed-point iteration for velocity-dependent forces and an embedded Euler error
+//!   estimate. Deviation: eq. 7f as printed reads `v + (h/2) a`; the leapfrog update (and the
+//!   only consistent one: constant acceleration must give `v + h a`) is `v + h a`, used here.
+//! - [`IntegratorKind::Rk2`]: adaptive Runge-Kutta 2(1) (Heun with embedded Euler).
+//! - [`IntegratorKind::Rk4`]: classical fourth-order Runge-Kutta with a fixed step.
+
+#[cfg(test)]
+mod tests;
+
+use serde::{Deserialize, Serialize};
+
+/// A second-order system `x'' = a(t, x, v)` split into a position-dependent and a
+/// velocity-dependent part, so the Verlet fixed-point iteration (LEMAN 4.2.1: "only
+/// velocity-dependent forces have to be recomputed") re-evaluates only the cheap part.
+pub trait SecondOrderSystem {
+    /// Number of scalar degrees of freedom (the length of `x`, `v` and `a`).
+    fn dofs(&self) -> usize;
+
+    /// Writes `a = M⁻¹ f_position(t, x)` (all forces that do not depend on velocity). A
+    /// system may cache what it derives from `(t, x)` here (e.g. the skeleton pose at `t`)
+    /// for the next [`add_velocity_accel`](Self::add_velocity_accel) calls.
+    fn position_accel(&mut self, t_s: f64, x: &[f32], a: &mut [f32]);
+
+    /// Adds `M⁻¹ f_velocity(t, x, v)` to `a`, where `t` and `x` are those of the last
+    /// [`position_accel`](Self::position_accel) call.
+    fn add_velocity_accel(&mut self, t_s: f64, x: &[f32], v: &[f32], a: &mut [f32]);
+
+    /// Whether any force depends on velocity. When not, Verlet needs a single evaluation.
+    fn has_velocity_forces(&self) -> bool {
+        true
+    }
+}
+
+/// Which integration method to use. Switchable between steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum IntegratorKind {
+    /// Explicit Euler, fixed step [`Tolerances::fixed_step_s`].
+    Euler,
+    /// Adaptive leapfrog Verlet 2(1), LEMAN eq. 7-12.
+    Verlet,
+    /// Adaptive Runge-Kutta 2(1) (Heun with embedded Euler).
+    Rk2,
+    /// Classical Runge-Kutta 4, fixed step [`Tolerances::fixed_step_s`].
+    Rk4,
+}
+
+impl IntegratorKind {
+    /// All methods, in the order of the paper's Table 1 then RK4.
+    pub const ALL: [IntegratorKind; 4] = [
+        IntegratorKind::Euler,
+        IntegratorKind::Verlet,
+        IntegratorKind::Rk2,
+        IntegratorKind::Rk4,
+    ];
+
+    /// Lower-case name as used on the command line and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            IntegratorKind::Euler => "euler",
+            IntegratorKind::Verlet => "verlet",
+            IntegratorKind::Rk2 => "rk2",
+            IntegratorKind::Rk4 => "rk4",
+        }
+    }
+
+    /// Parses a lower-case name (`euler`, `verlet`, `rk2`, `rk4`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// Whether the method chooses its own step size.
+    pub fn is_adaptive(self) -> bool {
+        matches!(self, IntegratorKind::Verlet | IntegratorKind::Rk2)
+    }
+}
+
+/// Step-size control parameters (LEMAN 4.2.1-4.2.2). Errors are scaled per component by
+/// `1 / max(|value|, threshold)` (eq. 8): absolute below the threshold, relative above.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Tolerances {
+    /// Step of the fixed-step methods (Euler, RK4), seconds.
+    pub fixed_step_s: f64,
+    /// Smallest step the adaptive methods take, seconds. A step at this size is accepted
+    /// whatever its error (and counted as forced).
+    pub min_step_s: f64,
+    /// Largest step the adaptive methods take, seconds.
+    pub max_step_s: f64,
+    /// ε^(r): accepted scaled position error per step (eq. 11-12).
+    pub position_tolerance: f64,
+    /// ε^(v): convergence tolerance of the Verlet velocity iteration (eq. 7g).
+    pub velocity_tolerance: f64,
+    /// r^(threshold): position magnitude above which the position error is relative, metres.
+    pub position_threshold_m: f64,
+    /// v^(threshold): velocity magnitude above which the velocity error is relative, m/s.
+    pub velocity_threshold_m_per_s: f64,
+    /// Maximum Verlet velocity iterations before the step is rejected and halved.
+    pub max_velocity_iterations: u32,
+    /// Safety factor on the proposed next step (`< 1`).
+    pub safety: f64,
+    /// Largest factor by which the step may grow from one step to the next.
+    pub max_growth: f64,
+    /// Smallest factor by which a rejected step shrinks.
+    pub max_shrink: f64,
+}
+
+impl Default for Tolerances {
+    fn default() -> Self {
+        Self {
+            fixed_step_s: 0.002,
+            min_step_s: 0.000_5,
+            max_step_s: 0.016,
+            position_tolerance: 1.0e-4,
+            velocity_tolerance: 1.0e-3,
+            position_threshold_m: 1.0,
+            velocity_threshold_m_per_s: 1.0,
+            max_velocity_iterations: 8,
+            safety: 0.9,
+            max_growth: 1.5,
+            max_shrink: 0.2,
+        }
+    }
+}
+
+/// What an integrator says about one proposed step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Proposal {
+    /// The step that was attempted, seconds.
+    pub step_s: f64,
+    /// Scaled error divided by the tolerance (`≤ 1` means acceptable); 0 for fixed-step methods.
+    pub error_ratio: f64,
+    /// Whether the integrator's own error control accepts the step.
+    pub accepted: bool,
+    /// Whether the step was accepted only because it was already at the minimum step.
+    pub forced: bool,
+    /// The step to try next (after acceptance) or to retry with (after rejection), seconds.
+    pub next_step_s: f64,
+    /// Full (position + velocity) force evaluations used.
+    pub position_evals: u32,
+    /// Velocity-only force evaluations used (Verlet iterations).
+    pub velocity_evals: u32,
+}
+
+/// An integrator with its scratch buffers (no allocation per step once sized).
+#[derive(Debug, Clone)]
+pub struct Integrator {
+    kind: IntegratorKind,
+    /// Step-size parameters; may be changed between steps.
+    pub tolerances: Tolerances,
+    scratch: [Vec<f32>; 6],
+}
+
+impl Integrator {
+    /// A new integrator of `kind`.
+    pub fn new(kind: IntegratorKind, tolerances: Tolerances) -> Self {
+        Self {
+            kind,
+            tolerances,
+            scratch: Default::default(),
+        }
+    }
+
+    /// The current method.
+    pub fn kind(&self) -> IntegratorKind {
+        self.kind
+    }
+
+    /// Switches method (takes effect at the next step).
+    pub fn set_kind(&mut self, kind: IntegratorKind) {
+        self.kind = kind;
+    }
+
+    /// The step to start with for the current method: the fixed step, or for the adaptive
+    /// methods the fixed step clamped into `[min_step_s, max_step_s]`.
+    pub fn initial_step_s(&self) -> f64 {
+        let t = &self.tolerances;
+        if self.kind.is_adaptive() {
+            t.fixed_step_s
+                .clamp(t.min_step_s, t.max_step_s.max(t.min_step_s))
+        } else {
+            t.fixed_step_s
+        }
+    }
+
+    fn ensure(&mut self, n: usize) {
+        for s in &mut self.scratch {
+            if s.len() != n {
+                s.resize(n, 0.0);
+            }
+        }
+    }
+
+    /// Proposes one step of size `step_s` from `(x, v)` at time `t_s`, writing the candidate
+    /// state into `x_new`, `v_new`. Nothing is committed: the caller decides.
+    ///
+    /// All slices must have length `sys.dofs()`; on a mismatch nothing is done and the proposal
+    /// says rejected with the same step (a programming error, never a panic).
+    #[allow(clippy::too_many_arguments)]
+    pub fn propose<S: SecondOrderSystem + ?Sized>(
+        &mut self,
+        sys: &mut S,
+        t_s: f64,
+        step_s: f64,
+        x: &[f32],
+        v: &[f32],
+        x_new: &mut [f32],
+        v_new: &mut [f32],
+    ) -> Proposal {
+        let n = sys.dofs();
+        if x.len() != n || v.len() != n || x_new.len() != n || v_new.len() != n {
+            return Proposal {
+                step_s,
+                error_ratio: f64::INFINITY,
+                accepted: false,
+                forced: false,
+                next_step_s: step_s,
+                position_evals: 0,
+                velocity_evals: 0,
+            };
+        }
+        self.ensure(n);
+        match self.kind {
+            IntegratorKind::Euler => self.euler(sys, t_s, step_s, x, v, x_new, v_new),
+            IntegratorKind::Verlet => self.verlet(sys, t_s, step_s, x, v, x_new, v_new),
+            IntegratorKind::Rk2 => self.rk2(sys, t_s, step_s, x, v, x_new, v_new),
+            IntegratorKind::Rk4 => self.rk4(sys, t_s, step_s, x, v, x_new, v_new),
+        }
+    }
+
+    fn fixed(&self, step_s: f64, position_evals: u32) -> Proposal {
+        Proposal {
+            step_s,
+            error_ratio: 0.0,
+            accepted: true,
+            forced: false,
+            next_step_s: self.tolerances.fixed_step_s,
+            position_evals,
+            velocity_evals: 0,
+        }
+    }
+
+    /// Accept/reject and next step from a scaled error of a method of order 2 with an
+    /// embedded order-1 estimate (eq. 12: `h₁ = h (Δ/ε)^(-1/2)`).
+    fn adapt(
+        &self,
+        step_s: f64,
+        error_ratio: f64,
+        position_evals: u32,
+        velocity_evals: u32,
+    ) -> Proposal {
+        let t = &self.tolerances;
+        let factor = if error_ratio.is_finite() && error_ratio > 0.0 {
+            (t.safety / error_ratio.sqrt()).clamp(t.max_shrink, t.max_growth)
+        } else if error_ratio == 0.0 {
+            t.max_growth
+        } else {
+            t.max_shrink
+        };
+        let at_min = step_s <= t.min_step_s * (1.0 + 1e-9);
+        let ok = error_ratio.is_finite() && error_ratio <= 1.0;
+        let accepted = ok || (at_min && error_ratio.is_finite());
+        let next = (step_s * factor).clamp(t.min_step_s, t.max_step_s.max(t.min_step_s));
+        Proposal {
+            step_s,
+            error_ratio,
+            accepted,
+            forced: accepted && !ok,
+            next_step_s: next,
+            position_evals,
+            velocity_evals,
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn euler<S: SecondOrderSystem + ?Sized>(
+        &mut self,
+        sys: &mut S,
+        t_s: f64,
+        h64: f64,
+        x: &[f32],
+        v: &[f32],
+        x_new: &mut [f32],
+        v_new: &mut [f32],
+    ) -> Proposal {
+        let h = h64 as f32;
+        let a = &mut self.scratch[0];
+        sys.position_accel(t_s, x, a);
+        sys.add_velocity_accel(t_s, x, v, a);
+        for i in 0..x.len() {
+            x_new[i] = x[i] + h * v[i];
+            v_new[i] = v[i] + h * a[i];
+        }
+        self.fixed(h64, 1)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn verlet<S: SecondOrderSystem + ?Sized>(
+        &mut self,
+        sys: &mut S,
+        t_s: f64,
+        h64: f64,
+        x: &[f32],
+        v: &[f32],
+        x_new: &mut [f32],
+        v_new: &mut [f32],
+    ) -> Proposal {
+        let tol = self.tolerances;
+        let h = h64 as f32;
+        let half = 0.5 * h;
+        let [x_half, a_pos, a, v_mid, _, _] = &mut self.scratch;
+        // (7a) r_{t+h/2} = r_t + h/2 v_t, written into x_new's scratch twin.
+        for i in 0..x.len() {
+            x_half[i] = x[i] + half * v[i];
+        }
+        let t_half = t_s + 0.5 * h64;
+        sys.position_accel(t_half, x_half, a_pos);
+        // (7b) v_{t+h} = v_t
+        v_new.copy_from_slice(v);
+        let vel = sys.has_velocity_forces();
+        let v_thr = tol.velocity_threshold_m_per_s as f32;
+        let eps_v = tol.velocity_tolerance as f32;
+        let max_iter = tol.max_velocity_iterations.max(1);
+        let mut velocity_evals = 0;
+        let mut converged = !vel;
+        if !vel {
+            for i in 0..x.len() {
+                v_new[i] = v[i] + h * a_pos[i];
+            }
+        } else {
+            for it in 0..max_iter {
+                // (7c) v_{t+h/2} = (v_{t+h} + v_t)/2
+                for i in 0..x.len() {
+                    v_mid[i] = 0.5 * (v_new[i] + v[i]);
+                }
+                // (7d) a = M⁻¹ f(r_{t+h/2}, v_{t+h/2}); only the velocity part changes.
+                a.copy_from_slice(a_pos);
+                sys.add_velocity_accel(t_half, x_half, v_mid, a);
+                velocity_evals += 1;
+                // (7e-7g) v_old = v_{t+h}; v_{t+h} = v_t + h a; until scaled change ≤ ε_v.
+                let mut change = 0.0f32;
+                for i in 0..x.len() {
+                    let nv = v[i] + h * a[i];
+                    let d = (nv - v_new[i]).abs() / v[i].abs().max(v_thr);
+                    change = change.max(d);
+                    v_new[i] = nv;
+                }
+                if it > 0 && change <= eps_v {
+                    converged = true;
+                    break;
+                }
+                if !change.is_finite() {
+                    break;
+                }
+            }
+        }
+        // (7h) r_{t+h} = r_{t+h/2} + h/2 v_{t+h}; (9, 11) Δ = ‖(r_t + h v_t − r_{t+h}) r_scale‖∞
+        let r_thr = tol.position_threshold_m as f32;
+        let mut delta = 0.0f32;
+        for i in 0..x.len() {
+            let xn = x_half[i] + half * v_new[i];
+            x_new[i] = xn;
+            let euler = x[i] + h * v[i];
+            let d = (euler - xn).abs() / x[i].abs().max(r_thr);
+            delta = delta.max(d);
+        }
+        let mut ratio = f64::from(delta) / tol.position_tolerance;
+        if !delta.is_finite() {
+            ratio = f64::INFINITY;
+        }
+        if !converged {
+            // The fixed point did not settle: treat as a failed step and halve.
+            let mut p = self.adapt(h64, f64::INFINITY, 1, velocity_evals);
+            p.next_step_s = (0.5 * h64).max(tol.min_step_s);
+            if h64 <= tol.min_step_s * (1.0 + 1e-9) && ratio.is_finite() {
+                p.accepted = true;
+                p.forced = true;
+                p.error_ratio = ratio;
+            }
+            return p;
+        }
+        self.adapt(h64, ratio, 1, velocity_evals)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn rk2<S: SecondOrderSystem + ?Sized>(
+        &mut self,
+        sys: &mut S,
+        t_s: f64,
+        h64: f64,
+        x: &[f32],
+        v: &[f32],
+        x_new: &mut [f32],
+        v_new: &mut [f32],
+    ) -> Proposal {
+        let tol = self.tolerances;
+        let h = h64 as f32;
+        let [a1, a2, x1, v1, _, _] = &mut self.scratch;
+        sys.position_accel(t_s, x, a1);
+        sys.add_velocity_accel(t_s, x, v, a1);
+        for i in 0..x.len() {
+            x1[i] = x[i] + h * v[i];
+            v1[i] = v[i] + h * a1[i];
+        }
+        sys.position_accel(t_s + h64, x1, a2);
+        sys.add_velocity_accel(t_s + h64, x1, v1, a2);
+        let r_thr = tol.position_threshold_m as f32;
+        let v_thr = tol.velocity_threshold_m_per_s as f32;
+        let mut err = 0.0f32;
+        for i in 0..x.len() {
+            // Heun: x₂ = x + h/2 (v + v₁), v₂ = v + h/2 (a₁ + a₂); Euler: (x₁, v₁).
+            let xn = x[i] + 0.5 * h * (v[i] + v1[i]);
+            let vn = v[i] + 0.5 * h * (a1[i] + a2[i]);
+            let ex = (xn - x1[i]).abs() / x[i].abs().max(r_thr);
+            // Velocity error is scaled to a position-like quantity by multiplying with h so one
+            // tolerance governs both (both are O(h²)).
+            let ev = h * (vn - v1[i]).abs() / v[i].abs().max(v_thr);
+            err = err.max(ex).max(ev);
+            x_new[i] = xn;
+            v_new[i] = vn;
+        }
+        let ratio = if err.is_finite() {
+            f64::from(err) / tol.position_tolerance
+        } else {
+            f64::INFINITY
+        };
+        self.adapt(h64, ratio, 2, 0)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn rk4<S: SecondOrderSystem + ?Sized>(
+        &mut self,
+        sys: &mut S,
+        t_s: f64,
+        h64: f64,
+        x: &[f32],
+        v: &[f32],
+        x_new: &mut [f32],
+        v_new: &mut [f32],
+    ) -> Proposal {
+        let h = h64 as f32;
+        let half = 0.5 * h;
+        let [a1, a2, a3, a4, xs, vs] = &mut self.scratch;
+        // k1 = (v, a1)
+        sys.position_accel(t_s, x, a1);
+        sys.add_velocity_accel(t_s, x, v, a1);
+        // k2 at (x + h/2 v, v + h/2 a1)
+        for i in 0..x.len() {
+            xs[i] = x[i] + half * v[i];
+            vs[i] = v[i] + half * a1[i];
+        }
+        sys.position_accel(t_s + 0.5 * h64, xs, a2);
+        sys.add_velocity_accel(t_s + 0.5 * h64, xs, vs, a2);
+        // x_new / v_new hold the running sums: Σ b_i k_i.
+        for i in 0..x.len() {
+            x_new[i] = v[i] + 2.0 * vs[i];
+            v_new[i] = a1[i] + 2.0 * a2[i];
+        }
+        // k3 at (x + h/2 v2, v + h/2 a2), v2 = vs
+        for i in 0..x.len() {
+            let v2 = vs[i];
+            xs[i] = x[i] + half * v2;
+            vs[i] = v[i] + half * a2[i];
+        }
+        sys.position_accel(t_s + 0.5 * h64, xs, a3);
+        sys.add_velocity_accel(t_s + 0.5 * h64, xs, vs, a3);
+        for i in 0..x.len() {
+            x_new[i] += 2.0 * vs[i];
+            v_new[i] += 2.0 * a3[i];
+        }
+        // k4 at (x + h v3, v + h a3)
+        for i in 0..x.len() {
+            let v3 = vs[i];
+            xs[i] = x[i] + h * v3;
+            vs[i] = v[i] + h * a3[i];
+        }
+        sys.position_accel(t_s + h64, xs, a4);
+        sys.add_velocity_accel(t_s + h64, xs, vs, a4);
+        let sixth = h / 6.0;
+        for i in 0..x.len() {
+            let dx = x_new[i] + vs[i];
+            let dv = v_new[i] + a4[i];
+            x_new[i] = x[i] + sixth * dx;
+            v_new[i] = v[i] + sixth * dv;
+        }
+        self.fixed(h64, 4)
+    }
+}
+
+/// Statistics of [`integrate`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct IntegrateStats {
+    /// Accepted steps.
+    pub accepted: u64,
+    /// Rejected attempts.
+    pub rejected: u64,
+    /// Smallest accepted step, seconds.
+    pub min_step_s: f64,
+    /// Largest accepted step, seconds.
+    pub max_step_s: f64,
+}
+
+/// Integrates an unconstrained system from `t0_s` to `t1_s` in place, with the method's own
+/// step control (the last step is shortened to land on `t1_s`). Meant for tests and simple
+/// systems; the deformation models have their own drivers that add constraints and guards.
+pub fn integrate<S: SecondOrderSystem + ?Sized>(
+    integrator: &mut Integrator,
+    sys: &mut S,
+    t0_s: f64,
+    t1_s: f64,
+    x: &mut [f32],
+    v: &mut [f32],
+) -> IntegrateStats {
+    let n = x.len();
+    let mut xn = vec![0.0f32; n];
+    let mut vn = vec![0.0f32; n];
+    let mut t = t0_s;
+    let mut h = integrator.initial_step_s();
+    let mut stats = IntegrateStats {
+        min_step_s: f64::INFINITY,
+        ..Default::default()
+    };
+    let mut guard = 0u64;
+    while t < t1_s - 1e-12 && guard < 100_000_000 {
+        guard += 1;
+        let step = h.min(t1_s - t);
+        let p = integrator.propose(sys, t, step, x, v, &mut xn, &mut vn);
+        if p.accepted {
+            x.copy_from_slice(&xn);
+            v.copy_from_slice(&vn);
+            t += step;
+            stats.accepted += 1;
+            stats.min_step_s = stats.min_step_s.min(step);
+            stats.max_step_s = stats.max_step_s.max(step);
+            // A step shortened to land on t1 does not shrink the controller's step.
+            h = if step < h {
+                h.max(p.next_step_s)
+            } else {
+                p.next_step_s
+            };
+        } else {
+            stats.rejected += 1;
+            h = p.next_step_s;
+        }
+    }
+    stats
+}
