@@ -1,1 +1,3 @@
 //! The application: the frame loop and its scheduler, app state and undoable edit commands.
+
+pub mod scheduler;
