@@ -1,1 +1,6 @@
-//! Tracking: pose filtering (One Euro) and prediction, tracker-to-world frames.
+//! Tracking: pose filtering (One Euro, per role, or raw) and prediction of the head pose to the
+//! expected display time. Pure: samples and their timestamps in, poses out.
+
+pub mod one_euro;
+
+pub use one_euro::{FilterConfig, PoseFilter};
