@@ -12,3 +12,80 @@ pub trait Decoder: Send {
     /// Forgets any partial packet (after a reconnect).
     fn reset(&mut self);
 }
+
+/// Counts discarded bytes and reports them as one [`DeviceEvent::Dropped`] just before the next
+/// event (or at the end of a feed), so drops appear in arrival order.
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct DropTally {
+    pending: usize,
+}
+
+impl DropTally {
+    /// Records `bytes` more discarded bytes.
+    pub fn add(&mut self, bytes: usize) {
+        self.pending = self.pending.saturating_add(bytes);
+    }
+
+    /// Emits the pending count as one `Dropped` event, if any.
+    pub fn flush(&mut self, out: &mut Vec<DeviceEvent>) {
+        if self.pending > 0 {
+            out.push(DeviceEvent::Dropped {
+                bytes: self.pending,
+            });
+            self.pending = 0;
+        }
+    }
+
+    /// Emits the pending count (if any), then `event`.
+    pub fn push(&mut self, event: DeviceEvent, out: &mut Vec<DeviceEvent>) {
+        self.flush(out);
+        out.push(event);
+    }
+
+    /// Forgets the pending count.
+    pub fn clear(&mut self) {
+        self.pending = 0;
+    }
+}
+
+/// Splits a byte stream into CR-terminated frames (Spaceball, Magellan) with a bounded buffer.
+/// A frame longer than `max_frame` bytes without a CR loses its oldest bytes, which are counted
+/// as dropped; the frame's tail is kept so a packet that began in it can still be found.
+#[derive(Debug, Clone)]
+pub(crate) struct CrFramer {
+    buf: Vec<u8>,
+    max_frame: usize,
+}
+
+impl CrFramer {
+    pub(crate) fn new(max_frame: usize) -> Self {
+        Self {
+            buf: Vec::with_capacity(max_frame),
+            max_frame: max_frame.max(1),
+        }
+    }
+
+    /// Feeds one byte; returns the finished frame (without its CR) when `byte` is a CR.
+    pub(crate) fn push(&mut self, byte: u8, drops: &mut DropTally) -> Option<Vec<u8>> {
+        if byte == b'\r' {
+            return Some(std::mem::take(&mut self.buf));
+        }
+        if self.buf.len() >= 2 * self.max_frame {
+            let excess = self.buf.len() - self.max_frame;
+            self.buf.drain(..excess);
+            drops.add(excess);
+        }
+        self.buf.push(byte);
+        None
+    }
+
+    pub(crate) fn clear(&mut self) {
+        self.buf.clear();
+    }
+
+    /// Bytes held now (for tests of the bound).
+    #[cfg(test)]
+    pub(crate) fn len(&self) -> usize {
+        self.buf.len()
+    }
+}

@@ -2,4 +2,14 @@
 //! transports (serial, HID, UDP, replay), recording and the hub sit at the edge.
 
 pub mod decoder;
+pub mod encode;
+pub mod fastrak;
+pub mod logitech;
+pub mod magellan;
+pub mod opentrack;
+pub mod protocol;
 pub mod sample;
+pub mod spaceball;
+pub mod spacemouse_hid;
+#[cfg(test)]
+mod test_util;
