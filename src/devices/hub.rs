@@ -1,0 +1,838 @@
+//! The device hub: one reader thread per device, off the render thread. Each reader opens its
+//! device, runs the driver's initialisation, then reads chunks, stamps each at arrival on the
+//! hub's [`Clock`], decodes it and publishes the newest sample of each role (head, wand,
+//! navigation) with the device's state. The frame loop only ever takes a [`HubSnapshot`] (a
+//! short lock and a copy; it never waits for a device).
+//!
+//! When a device errors or is unplugged the reader reports it [`DeviceState::Lost`], drops the
+//! connection and reopens it with a doubling backoff (profile `driver.reconnect_min_s` ..
+//! `reconnect_max_s`), rerunning the initialisation; the other devices and the last good values
+//! carry on. A running device that sends nothing for `driver.stale_after_s` is reported
+//! [`DeviceState::Stale`].
+//!
+//! The same [`HubState`] is driven by [`crate::devices::replay::Replayer`] from a recorded
+//! session, so live and replayed samples go through exactly the same code.
+
+use crate::clock::Clock;
+use crate::devices::decoder::Decoder;
+use crate::devices::desktop::{DesktopDevice, DesktopEvent};
+use crate::devices::driver::{self, DriverError, InitSettings, Link};
+use crate::devices::profile::{DeviceKind, Input, Profile, Role, RoleBinding, TransportSpec};
+use crate::devices::protocol::decoder_with_settings;
+use crate::devices::sample::{DeviceEvent, StatusEvent};
+use crate::devices::session::{Record, SessionError, SessionHeader, SessionWriter};
+use crate::devices::transport::hid::HidOpener;
+use crate::devices::transport::serial::SerialOpener;
+use crate::devices::transport::udp::UdpOpener;
+use crate::devices::transport::{Opener, Transport};
+use crate::pose::Pose;
+use serde::Serialize;
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// How a device is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DeviceState {
+    /// Being opened or initialised.
+    Opening,
+    /// Delivering data.
+    Running,
+    /// Open, but nothing arrived for longer than its `stale_after_s`.
+    Stale,
+    /// Failed or unplugged; being reopened.
+    Lost,
+    /// The hub stopped.
+    Stopped,
+}
+
+/// One device's state and counters.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DeviceStatus {
+    /// Name from the profile.
+    pub name: String,
+    /// `desktop` or the protocol name.
+    pub protocol: String,
+    /// What it is connected through.
+    pub transport: String,
+    /// Current state.
+    pub state: DeviceState,
+    /// Arrival time of the newest chunk (hub clock).
+    pub last_data_at: Option<Duration>,
+    /// Samples (poses and axes) per second over the last second.
+    pub rate_hz: f64,
+    /// Chunks read.
+    pub chunks: u64,
+    /// Bytes read.
+    pub bytes: u64,
+    /// Samples decoded.
+    pub samples: u64,
+    /// Bytes the decoder dropped while resynchronising.
+    pub dropped_bytes: u64,
+    /// How many times it was opened after the first time.
+    pub reconnects: u64,
+    /// The last error (cleared when it runs again).
+    pub last_error: Option<String>,
+    /// Model the device identified itself as.
+    pub model: Option<String>,
+    #[serde(skip)]
+    opened_at: Option<Duration>,
+    #[serde(skip)]
+    opened_count: u64,
+    #[serde(skip)]
+    sample_times: VecDeque<Duration>,
+    #[serde(skip)]
+    stale_after: Duration,
+}
+
+/// The newest state of one role.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RoleSample {
+    /// The role.
+    pub role: Role,
+    /// Index of the device bound to it (into the profile's devices), if any.
+    pub device: Option<usize>,
+    /// Newest pose, after the profile's axis maps (pose roles).
+    pub pose: Option<Pose>,
+    /// Newest six axes after the maps (axes roles); zero until data arrives, and zero while
+    /// the device is lost (so a lost controller does not keep flying the vehicle).
+    pub axes: [f32; 6],
+    /// Buttons held (0-based); empty while the device is lost.
+    pub pressed: Vec<u8>,
+    /// Arrival time of the newest sample (hub clock).
+    pub at: Option<Duration>,
+    /// State of the bound device ([`DeviceState::Lost`] when nothing is bound).
+    pub state: DeviceState,
+}
+
+impl RoleSample {
+    fn empty(role: Role) -> Self {
+        Self {
+            role,
+            device: None,
+            pose: None,
+            axes: [0.0; 6],
+            pressed: Vec::new(),
+            at: None,
+            state: DeviceState::Lost,
+        }
+    }
+}
+
+/// What the frame loop reads: every role's newest sample and every device's status.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HubSnapshot {
+    /// The hub clock's time when the snapshot was taken.
+    pub now: Duration,
+    /// Head, wand, navigation, in [`Role::ALL`] order.
+    pub roles: [RoleSample; 3],
+    /// One entry per profile device.
+    pub devices: Vec<DeviceStatus>,
+}
+
+impl HubSnapshot {
+    /// The newest sample of `role`.
+    pub fn role(&self, role: Role) -> &RoleSample {
+        &self.roles[role.index()]
+    }
+}
+
+/// A device event with its arrival time and device, as delivered (before the role maps).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TimedEvent {
+    /// Arrival time of the chunk (or desktop event) that completed it.
+    pub at: Duration,
+    /// Index into the profile's devices.
+    pub device: usize,
+    /// The event.
+    pub event: DeviceEvent,
+}
+
+/// Events kept for [`HubState::drain_events`] at most; older ones are dropped.
+pub const EVENT_QUEUE_LEN: usize = 8192;
+
+/// The hub's data: role samples, device statuses, the desktop stand-in and the event queue.
+/// Pure (no clock, threads or I/O): live readers and replays feed it timed chunks.
+pub struct HubState {
+    profile: Profile,
+    roles: [RoleSample; 3],
+    devices: Vec<DeviceStatus>,
+    bindings: Vec<Vec<RoleBinding>>,
+    desktop: Option<(usize, DesktopDevice)>,
+    events: VecDeque<TimedEvent>,
+}
+
+impl HubState {
+    /// Fresh state for `profile` (every device [`DeviceState::Opening`]).
+    pub fn new(profile: Profile) -> Self {
+        let devices = profile
+            .devices
+            .iter()
+            .map(|d| DeviceStatus {
+                name: d.name.clone(),
+                protocol: String::from(d.protocol),
+                transport: describe_transport(&d.transport),
+                state: DeviceState::Opening,
+                last_data_at: None,
+                rate_hz: 0.0,
+                chunks: 0,
+                bytes: 0,
+                samples: 0,
+                dropped_bytes: 0,
+                reconnects: 0,
+                last_error: None,
+                model: None,
+                opened_at: None,
+                opened_count: 0,
+                sample_times: VecDeque::new(),
+                stale_after: Duration::from_secs_f64(d.driver.stale_after_s),
+            })
+            .collect();
+        let bindings = (0..profile.devices.len())
+            .map(|i| {
+                profile
+                    .roles
+                    .iter()
+                    .filter(|b| profile.device_index(&b.device) == Some(i))
+                    .cloned()
+                    .collect()
+            })
+            .collect();
+        let mut roles = Role::ALL.map(RoleSample::empty);
+        for b in &profile.roles {
+            roles[b.role.index()].device = profile.device_index(&b.device);
+        }
+        let desktop = profile
+            .devices
+            .iter()
+            .position(|d| d.protocol == DeviceKind::Desktop)
+            .map(|i| (i, DesktopDevice::new(profile.devices[i].desktop.clone())));
+        Self {
+            profile,
+            roles,
+            devices,
+            bindings,
+            desktop,
+            events: VecDeque::new(),
+        }
+    }
+
+    /// The profile.
+    pub fn profile(&self) -> &Profile {
+        &self.profile
+    }
+
+    /// The device was (re)opened at `at`. For the desktop device this also publishes its
+    /// initial samples.
+    pub fn opened(&mut self, device: usize, at: Duration) {
+        let mut initial = Vec::new();
+        if let Some((d, desk)) = &self.desktop
+            && *d == device
+        {
+            desk.current(&mut initial);
+        }
+        if let Some(s) = self.devices.get_mut(device) {
+            if s.opened_count > 0 {
+                s.reconnects += 1;
+            }
+            s.opened_count += 1;
+            s.opened_at = Some(at);
+            s.state = if initial.is_empty() {
+                DeviceState::Opening
+            } else {
+                DeviceState::Running
+            };
+        }
+        if !initial.is_empty() {
+            self.apply(device, at, &initial);
+        }
+    }
+
+    /// Initialisation finished: the device is running.
+    pub fn running(&mut self, device: usize, at: Duration) {
+        if let Some(s) = self.devices.get_mut(device) {
+            s.state = DeviceState::Running;
+            s.last_error = None;
+            s.opened_at = Some(at);
+        }
+    }
+
+    /// The device failed at `at`.
+    pub fn lost(&mut self, device: usize, _at: Duration, error: &str) {
+        if let Some(s) = self.devices.get_mut(device) {
+            s.state = DeviceState::Lost;
+            s.last_error = Some(error.to_string());
+        }
+    }
+
+    /// The hub stopped.
+    pub fn stopped(&mut self) {
+        for s in &mut self.devices {
+            s.state = DeviceState::Stopped;
+        }
+    }
+
+    /// A chunk of `bytes` from `device` arrived at `at` and decoded to `events`.
+    pub fn chunk(&mut self, device: usize, at: Duration, bytes: usize, events: &[DeviceEvent]) {
+        if let Some(s) = self.devices.get_mut(device) {
+            s.chunks += 1;
+            s.bytes += bytes as u64;
+            s.last_data_at = Some(at);
+            if s.state == DeviceState::Stale {
+                s.state = DeviceState::Running;
+            }
+        }
+        self.apply(device, at, events);
+    }
+
+    /// A desktop event arrived at `at`; returns false when the profile has no desktop device.
+    pub fn desktop_event(&mut self, at: Duration, event: &DesktopEvent) -> bool {
+        let Some((device, desk)) = &mut self.desktop else {
+            return false;
+        };
+        let device = *device;
+        let mut out = Vec::new();
+        desk.feed(event, &mut out);
+        if let Some(s) = self.devices.get_mut(device) {
+            s.last_data_at = Some(at);
+        }
+        self.apply(device, at, &out);
+        true
+    }
+
+    fn apply(&mut self, device: usize, at: Duration, events: &[DeviceEvent]) {
+        let Some(status) = self.devices.get_mut(device) else {
+            return;
+        };
+        for event in events {
+            match event {
+                DeviceEvent::Pose(_) | DeviceEvent::Axes(_) => {
+                    status.samples += 1;
+                    status.sample_times.push_back(at);
+                }
+                DeviceEvent::Dropped { bytes } => status.dropped_bytes += *bytes as u64,
+                DeviceEvent::Status(StatusEvent::Identified { model, .. }) => {
+                    status.model = Some(model.clone());
+                }
+                DeviceEvent::Status(StatusEvent::Report { .. }) | DeviceEvent::Buttons { .. } => {}
+            }
+            for b in self.bindings.get(device).into_iter().flatten() {
+                let role = &mut self.roles[b.role.index()];
+                match (event, b.input) {
+                    (DeviceEvent::Pose(p), Input::Pose) if p.station == b.station => {
+                        if let Some(pose) = b.map.apply_pose(&p.pose) {
+                            role.pose = Some(pose);
+                            role.pressed.clone_from(&p.pressed);
+                            role.at = Some(at);
+                        }
+                    }
+                    (DeviceEvent::Axes(a), Input::Axes) => {
+                        role.axes = b.map.apply_axes(a.value);
+                        role.at = Some(at);
+                    }
+                    (DeviceEvent::Buttons { pressed }, Input::Axes) => {
+                        role.pressed.clone_from(pressed);
+                        role.at = Some(at);
+                    }
+                    _ => {}
+                }
+            }
+            if self.events.len() >= EVENT_QUEUE_LEN {
+                self.events.pop_front();
+            }
+            self.events.push_back(TimedEvent {
+                at,
+                device,
+                event: event.clone(),
+            });
+        }
+        trim_rate_window(status, at);
+    }
+
+    /// Takes every event delivered since the last call (at most [`EVENT_QUEUE_LEN`]).
+    pub fn drain_events(&mut self) -> Vec<TimedEvent> {
+        self.events.drain(..).collect()
+    }
+
+    /// The roles and device statuses as of `now` (stale detection and rates use `now`).
+    pub fn snapshot(&mut self, now: Duration) -> HubSnapshot {
+        for s in &mut self.devices {
+            trim_rate_window(s, now);
+            s.rate_hz = s.sample_times.len() as f64;
+            if s.state == DeviceState::Running {
+                let since = s.last_data_at.max(s.opened_at).unwrap_or(Duration::ZERO);
+                if now.saturating_sub(since) > s.stale_after {
+                    s.state = DeviceState::Stale;
+                }
+            }
+        }
+        let mut roles = self.roles.clone();
+        for r in &mut roles {
+            r.state = r
+                .device
+                .and_then(|d| self.devices.get(d))
+                .map_or(DeviceState::Lost, |s| s.state);
+            let axes_role = self
+                .profile
+                .binding(r.role)
+                .is_some_and(|b| b.input == Input::Axes);
+            if matches!(r.state, DeviceState::Lost | DeviceState::Stopped) {
+                r.pressed.clear();
+                if axes_role {
+                    r.axes = [0.0; 6];
+                }
+            }
+        }
+        HubSnapshot {
+            now,
+            roles,
+            devices: self.devices.clone(),
+        }
+    }
+}
+
+fn trim_rate_window(s: &mut DeviceStatus, now: Duration) {
+    while s
+        .sample_times
+        .front()
+        .is_some_and(|t| now.saturating_sub(*t) >= Duration::from_secs(1))
+    {
+        s.sample_times.pop_front();
+    }
+}
+
+/// A short description of a transport spec.
+pub fn describe_transport(t: &TransportSpec) -> String {
+    match t {
+        TransportSpec::None => "window".into(),
+        TransportSpec::Serial(s) => format!("serial {}", s.path),
+        TransportSpec::Hid(h) => crate::devices::transport::hid::describe_spec(h),
+        TransportSpec::Udp(u) => format!("udp {}", u.bind),
+    }
+}
+
+/// Why a hub could not start or stop cleanly.
+#[derive(Debug, thiserror::Error)]
+pub enum HubError {
+    /// A device's decoder settings are unusable.
+    #[error("device {device}: {message}")]
+    Device {
+        /// The device's name.
+        device: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The session file could not be written.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+    /// A reader thread could not be started.
+    #[error("cannot start a reader thread: {0}")]
+    Thread(std::io::Error),
+}
+
+/// Where a device's bytes come from: an opener per wire device (the desktop device has none).
+pub type Openers = Vec<Option<Box<dyn Opener>>>;
+
+/// The openers a profile describes (serial, HID, UDP), one per device; `None` for desktop.
+pub fn openers_for(profile: &Profile) -> Openers {
+    profile
+        .devices
+        .iter()
+        .map(|d| -> Option<Box<dyn Opener>> {
+            let read_timeout = Duration::from_secs_f64(d.driver.read_timeout_s);
+            match (&d.protocol, &d.transport) {
+                (DeviceKind::Wire(p), TransportSpec::Serial(s)) => Some(Box::new(SerialOpener {
+                    path: s.path.clone(),
+                    line: crate::devices::profile::SerialLine::resolve(*p, s),
+                    read_timeout,
+                })),
+                (DeviceKind::Wire(_), TransportSpec::Hid(h)) => Some(Box::new(HidOpener {
+                    spec: h.clone(),
+                    read_timeout,
+                })),
+                (DeviceKind::Wire(_), TransportSpec::Udp(u)) => Some(Box::new(UdpOpener {
+                    bind: u.bind.clone(),
+                    read_timeout,
+                })),
+                _ => None,
+            }
+        })
+        .collect()
+}
+
+struct Shared {
+    clock: Arc<dyn Clock>,
+    state: Mutex<HubState>,
+    recorder: Mutex<Option<SessionWriter>>,
+    record_error: Mutex<Option<String>>,
+    stop: AtomicBool,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+impl Shared {
+    /// Stamps a record's time on the clock (or uses a replay's recorded time) and writes it to
+    /// the session being recorded, under one lock so the file's times never decrease.
+    fn stamp(&self, recorded: Option<Duration>, make: impl FnOnce(Duration) -> Record) -> Duration {
+        let mut rec = lock(&self.recorder);
+        let at = recorded.unwrap_or_else(|| self.clock.now());
+        if let Some(w) = rec.as_mut()
+            && let Err(e) = w.write(&make(at))
+        {
+            let mut err = lock(&self.record_error);
+            if err.is_none() {
+                tracing::error!("recording failed: {e}");
+                *err = Some(e.to_string());
+            }
+        }
+        at
+    }
+}
+
+/// Options of a live hub.
+#[derive(Debug, Clone, Default)]
+pub struct HubOptions {
+    /// Record every chunk, write and desktop event into this session file (streamed to a
+    /// temporary file, renamed into place by [`Hub::stop`]).
+    pub record_to: Option<PathBuf>,
+}
+
+/// The live device hub. Dropping it stops the readers (without finishing a recording: call
+/// [`Hub::stop`] for that).
+pub struct Hub {
+    shared: Arc<Shared>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for Hub {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Hub")
+            .field("threads", &self.threads.len())
+            .finish()
+    }
+}
+
+impl Hub {
+    /// Starts a hub for `profile`, opening its devices through their transports.
+    pub fn start(
+        profile: Profile,
+        clock: Arc<dyn Clock>,
+        options: HubOptions,
+    ) -> Result<Self, HubError> {
+        let openers = openers_for(&profile);
+        Self::start_with(profile, openers, clock, options)
+    }
+
+    /// The default hub: the desktop stand-ins only, on the real clock.
+    pub fn desktop() -> Result<Self, HubError> {
+        Self::start(
+            Profile::desktop_default(),
+            Arc::new(crate::clock::RealClock::new()),
+            HubOptions::default(),
+        )
+    }
+
+    /// Starts a hub with explicit openers (one per profile device; tests and replays use their
+    /// own). A wire device without an opener stays [`DeviceState::Lost`].
+    pub fn start_with(
+        profile: Profile,
+        mut openers: Openers,
+        clock: Arc<dyn Clock>,
+        options: HubOptions,
+    ) -> Result<Self, HubError> {
+        let mut decoders = Vec::new();
+        for d in &profile.devices {
+            decoders.push(match d.protocol {
+                DeviceKind::Wire(p) => {
+                    Some(
+                        decoder_with_settings(p, &d.decoder).map_err(|e| HubError::Device {
+                            device: d.name.clone(),
+                            message: e.to_string(),
+                        })?,
+                    )
+                }
+                DeviceKind::Desktop => None,
+            });
+        }
+        let recorder = match &options.record_to {
+            Some(path) => Some(SessionWriter::create(
+                path,
+                &SessionHeader::new(profile.clone()),
+            )?),
+            None => None,
+        };
+        let shared = Arc::new(Shared {
+            clock,
+            state: Mutex::new(HubState::new(profile.clone())),
+            recorder: Mutex::new(recorder),
+            record_error: Mutex::new(None),
+            stop: AtomicBool::new(false),
+        });
+        let mut threads = Vec::new();
+        openers.resize_with(profile.devices.len(), || None);
+        for (index, (decoder, opener)) in decoders.into_iter().zip(openers).enumerate() {
+            let spec = &profile.devices[index];
+            match (spec.protocol, decoder, opener) {
+                (DeviceKind::Desktop, _, _) => {
+                    let at = shared.stamp(None, |at| Record::Opened { at, device: index });
+                    lock(&shared.state).opened(index, at);
+                }
+                (DeviceKind::Wire(protocol), Some(decoder), Some(opener)) => {
+                    let stations = profile
+                        .roles
+                        .iter()
+                        .filter(|b| b.device == spec.name && b.input == Input::Pose)
+                        .map(|b| b.station)
+                        .collect();
+                    let reader = Reader {
+                        shared: Arc::clone(&shared),
+                        index,
+                        protocol,
+                        init: InitSettings {
+                            decoder: spec.decoder.clone(),
+                            stations,
+                            timeout: Duration::from_secs_f64(spec.driver.init_timeout_s),
+                        },
+                        reconnect_min: Duration::from_secs_f64(spec.driver.reconnect_min_s),
+                        reconnect_max: Duration::from_secs_f64(spec.driver.reconnect_max_s),
+                        decoder,
+                        opener,
+                    };
+                    let handle = std::thread::Builder::new()
+                        .name(format!("leman-device-{}", spec.name))
+                        .spawn(move || reader.run())
+                        .map_err(HubError::Thread)?;
+                    threads.push(handle);
+                }
+                (DeviceKind::Wire(_), _, _) => {
+                    let at = shared.clock.now();
+                    lock(&shared.state).lost(index, at, "no transport to open it with");
+                }
+            }
+        }
+        Ok(Self { shared, threads })
+    }
+
+    /// Every role's newest sample and every device's status, now. Never blocks on a device.
+    pub fn snapshot(&self) -> HubSnapshot {
+        let now = self.shared.clock.now();
+        lock(&self.shared.state).snapshot(now)
+    }
+
+    /// The newest sample of one role.
+    pub fn newest(&self, role: Role) -> RoleSample {
+        let snap = self.snapshot();
+        snap.roles[role.index()].clone()
+    }
+
+    /// Every device event since the last call, in arrival order (button edges a frame loop
+    /// would otherwise miss between two snapshots).
+    pub fn drain_events(&self) -> Vec<TimedEvent> {
+        lock(&self.shared.state).drain_events()
+    }
+
+    /// Hands a window event to the desktop stand-ins: stamped now, recorded, applied at once.
+    /// Ignored (returns false) when the profile has no desktop device.
+    pub fn feed_desktop(&self, event: DesktopEvent) -> bool {
+        let has_desktop = lock(&self.shared.state).desktop.is_some();
+        if !has_desktop {
+            return false;
+        }
+        let at = self.shared.stamp(None, |at| Record::Desktop {
+            at,
+            event: event.clone(),
+        });
+        lock(&self.shared.state).desktop_event(at, &event)
+    }
+
+    /// The first recording error, if writing the session failed.
+    pub fn record_error(&self) -> Option<String> {
+        lock(&self.shared.record_error).clone()
+    }
+
+    /// Stops the readers, waits for them, and finishes the recording (renaming it into place);
+    /// returns the session path if one was recorded.
+    pub fn stop(mut self) -> Result<Option<PathBuf>, HubError> {
+        self.halt();
+        let writer = lock(&self.shared.recorder).take();
+        match writer {
+            Some(w) => Ok(Some(w.finish()?)),
+            None => Ok(None),
+        }
+    }
+
+    fn halt(&mut self) {
+        self.shared.stop.store(true, Ordering::SeqCst);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+        lock(&self.shared.state).stopped();
+    }
+}
+
+impl Drop for Hub {
+    fn drop(&mut self) {
+        self.halt();
+    }
+}
+
+struct Reader {
+    shared: Arc<Shared>,
+    index: usize,
+    protocol: crate::devices::protocol::Protocol,
+    init: InitSettings,
+    reconnect_min: Duration,
+    reconnect_max: Duration,
+    decoder: Box<dyn Decoder>,
+    opener: Box<dyn Opener>,
+}
+
+impl Reader {
+    fn stopping(&self) -> bool {
+        self.shared.stop.load(Ordering::SeqCst)
+    }
+
+    /// Sleeps up to `d` in real time, waking early when the hub stops.
+    fn pause(&self, d: Duration) {
+        let step = Duration::from_millis(10);
+        let mut left = d;
+        while !left.is_zero() && !self.stopping() {
+            let s = left.min(step);
+            std::thread::sleep(s);
+            left = left.saturating_sub(s);
+        }
+    }
+
+    fn lose(&self, error: &str, last_error: &mut Option<String>) {
+        let index = self.index;
+        // Record each distinct failure once, not every retry.
+        if last_error.as_deref() != Some(error) {
+            tracing::warn!("device {index}: {error}");
+            let at = self.shared.stamp(None, |at| Record::Lost {
+                at,
+                device: index,
+                error: error.to_string(),
+            });
+            lock(&self.shared.state).lost(index, at, error);
+            *last_error = Some(error.to_string());
+        }
+    }
+
+    fn handle_chunk(
+        shared: &Shared,
+        decoder: &mut dyn Decoder,
+        index: usize,
+        bytes: &[u8],
+        recorded: Option<Duration>,
+        events: &mut Vec<DeviceEvent>,
+    ) {
+        let at = shared.stamp(recorded, |at| Record::Chunk {
+            at,
+            device: index,
+            bytes: bytes.to_vec(),
+        });
+        events.clear();
+        decoder.feed(bytes, events);
+        lock(&shared.state).chunk(index, at, bytes.len(), events);
+    }
+
+    fn run(mut self) {
+        let mut backoff = self.reconnect_min;
+        let mut last_error: Option<String> = None;
+        let mut events = Vec::new();
+        let mut buf = vec![0u8; 4096];
+        while !self.stopping() {
+            let mut transport = match self.opener.open() {
+                Ok(t) => t,
+                Err(e) => {
+                    self.lose(&e.to_string(), &mut last_error);
+                    self.pause(backoff);
+                    backoff = (backoff * 2).min(self.reconnect_max);
+                    continue;
+                }
+            };
+            let index = self.index;
+            let at = self
+                .shared
+                .stamp(None, |at| Record::Opened { at, device: index });
+            lock(&self.shared.state).opened(index, at);
+            self.decoder.reset();
+            match self.initialise(transport.as_mut(), &mut events) {
+                Ok(()) => {}
+                Err(DriverError::Stopped) => break,
+                Err(e) => {
+                    self.lose(&e.to_string(), &mut last_error);
+                    drop(transport);
+                    self.pause(backoff);
+                    backoff = (backoff * 2).min(self.reconnect_max);
+                    continue;
+                }
+            }
+            let at = self.shared.clock.now();
+            lock(&self.shared.state).running(index, at);
+            last_error = None;
+            backoff = self.reconnect_min;
+            while !self.stopping() {
+                match transport.read(&mut buf) {
+                    Ok(0) => {}
+                    Ok(n) => Self::handle_chunk(
+                        &self.shared,
+                        self.decoder.as_mut(),
+                        index,
+                        &buf[..n],
+                        transport.recorded_arrival(),
+                        &mut events,
+                    ),
+                    Err(e) => {
+                        self.lose(&e.to_string(), &mut last_error);
+                        break;
+                    }
+                }
+            }
+            drop(transport);
+            if !self.stopping() {
+                self.pause(backoff);
+            }
+        }
+    }
+
+    fn initialise(
+        &mut self,
+        transport: &mut dyn Transport,
+        events: &mut Vec<DeviceEvent>,
+    ) -> Result<(), DriverError> {
+        let shared = Arc::clone(&self.shared);
+        let index = self.index;
+        let decoder = self.decoder.as_mut();
+        // Replays hold no replies to commands: skip initialisation for them.
+        if !transport.needs_init() {
+            return Ok(());
+        }
+        let mut on_read = |bytes: &[u8]| {
+            Self::handle_chunk(&shared, decoder, index, bytes, None, events);
+        };
+        let shared2 = Arc::clone(&self.shared);
+        let mut on_sent = |bytes: &[u8]| {
+            shared2.stamp(None, |at| Record::Sent {
+                at,
+                device: index,
+                bytes: bytes.to_vec(),
+            });
+        };
+        let clock = Arc::clone(&self.shared.clock);
+        let mut link = Link::new(
+            transport,
+            clock.as_ref(),
+            &self.shared.stop,
+            &mut on_read,
+            &mut on_sent,
+        );
+        driver::initialise(self.protocol, &self.init, &mut link)
+    }
+}

@@ -1,0 +1,668 @@
+//! Recorded device sessions: a header (format version, the device profile with its device table
+//! and roles), then every chunk of raw bytes exactly as it arrived, with its arrival time and
+//! device index, plus the desktop stand-in events. The format is line-based text, documented in
+//! `docs/sessions.md`:
+//!
+//! ```text
+//! leman-session 1
+//! header {"recorded_by":"leman 0.1.0","profile":{...}}
+//! o 0 1                      device 1 opened (decoder reset)
+//! w 1000 1 0d4052455345540d  bytes written to device 1 (hex)
+//! c 2500000 1 4031...        a chunk read from device 1 (hex), at 2.5 ms
+//! l 9000000 1 "unplugged"    device 1 lost (a JSON string says why)
+//! e 3000000 {"kind":"mouse_move","x":0.5,"y":0.5}
+//! end 5
+//! ```
+//!
+//! Times are integer nanoseconds from the start of the recording and never decrease. The `end`
+//! line carries the number of records, so a file cut at a line boundary is still detected.
+
+use crate::devices::desktop::DesktopEvent;
+use crate::devices::profile::Profile;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// The session format version this build writes and reads.
+pub const SESSION_VERSION: u32 = 1;
+
+const MAGIC: &str = "leman-session";
+
+/// What a session starts with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SessionHeader {
+    /// Program and version that wrote it.
+    pub recorded_by: String,
+    /// The device profile in force: the device table (protocol, transport and decoder settings)
+    /// and the role bindings. Record device indices index `profile.devices`.
+    pub profile: Profile,
+}
+
+impl SessionHeader {
+    /// A header for `profile`, written by this build.
+    pub fn new(profile: Profile) -> Self {
+        Self {
+            recorded_by: format!("leman {}", env!("CARGO_PKG_VERSION")),
+            profile,
+        }
+    }
+}
+
+/// One timed record.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Record {
+    /// Bytes read from a device, exactly as one read returned them.
+    Chunk {
+        /// Arrival time.
+        at: Duration,
+        /// Index into the profile's devices.
+        device: usize,
+        /// The bytes.
+        bytes: Vec<u8>,
+    },
+    /// Bytes written to a device (initialisation commands).
+    Sent {
+        /// When they were written.
+        at: Duration,
+        /// Index into the profile's devices.
+        device: usize,
+        /// The bytes.
+        bytes: Vec<u8>,
+    },
+    /// The device was (re)opened; its decoder starts afresh.
+    Opened {
+        /// When.
+        at: Duration,
+        /// Index into the profile's devices.
+        device: usize,
+    },
+    /// The device was lost (error, unplugged).
+    Lost {
+        /// When.
+        at: Duration,
+        /// Index into the profile's devices.
+        device: usize,
+        /// Why.
+        error: String,
+    },
+    /// A desktop stand-in event.
+    Desktop {
+        /// When the window delivered it.
+        at: Duration,
+        /// The event.
+        event: DesktopEvent,
+    },
+}
+
+impl Record {
+    /// The record's time.
+    pub fn at(&self) -> Duration {
+        match self {
+            Record::Chunk { at, .. }
+            | Record::Sent { at, .. }
+            | Record::Opened { at, .. }
+            | Record::Lost { at, .. }
+            | Record::Desktop { at, .. } => *at,
+        }
+    }
+
+    /// The device index, if the record belongs to one.
+    pub fn device(&self) -> Option<usize> {
+        match self {
+            Record::Chunk { device, .. }
+            | Record::Sent { device, .. }
+            | Record::Opened { device, .. }
+            | Record::Lost { device, .. } => Some(*device),
+            Record::Desktop { .. } => None,
+        }
+    }
+
+    /// Appends the record's line (with its newline).
+    pub fn write_line(&self, out: &mut String) {
+        use std::fmt::Write as _;
+        let ns = |at: &Duration| at.as_nanos();
+        // Writing into a String cannot fail.
+        let _ = match self {
+            Record::Chunk { at, device, bytes } => {
+                writeln!(out, "c {} {} {}", ns(at), device, hex(bytes))
+            }
+            Record::Sent { at, device, bytes } => {
+                writeln!(out, "w {} {} {}", ns(at), device, hex(bytes))
+            }
+            Record::Opened { at, device } => writeln!(out, "o {} {}", ns(at), device),
+            Record::Lost { at, device, error } => writeln!(
+                out,
+                "l {} {} {}",
+                ns(at),
+                device,
+                serde_json::to_string(error).unwrap_or_else(|_| "\"?\"".into())
+            ),
+            Record::Desktop { at, event } => writeln!(
+                out,
+                "e {} {}",
+                ns(at),
+                serde_json::to_string(event).unwrap_or_else(|_| "{}".into())
+            ),
+        };
+    }
+}
+
+/// A whole session in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Session {
+    /// The header.
+    pub header: SessionHeader,
+    /// The records in file order (time never decreases).
+    pub records: Vec<Record>,
+}
+
+/// A session file that cannot be read; names the file and where in it.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The file could not be read or written.
+    #[error("session {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The content is wrong at a known place.
+    #[error("session {path}: line {line} (byte offset {offset}): {message}")]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// Byte offset of the start of that line.
+        offset: usize,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn hex(bytes: &[u8]) -> String {
+    const DIGITS: &[u8; 16] = b"0123456789abcdef";
+    let mut s = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        s.push(DIGITS[usize::from(b >> 4)] as char);
+        s.push(DIGITS[usize::from(b & 15)] as char);
+    }
+    s
+}
+
+fn unhex(text: &str) -> Result<Vec<u8>, String> {
+    let digit = |c: u8| -> Result<u8, String> {
+        match c {
+            b'0'..=b'9' => Ok(c - b'0'),
+            b'a'..=b'f' => Ok(c - b'a' + 10),
+            b'A'..=b'F' => Ok(c - b'A' + 10),
+            _ => Err(format!("{:?} is not a hex digit", char::from(c))),
+        }
+    };
+    let b = text.as_bytes();
+    if b.len() % 2 != 0 {
+        return Err(format!("odd number of hex digits ({})", b.len()));
+    }
+    b.chunks_exact(2)
+        .map(|pair| Ok(digit(pair[0])? << 4 | digit(pair[1])?))
+        .collect()
+}
+
+impl Session {
+    /// An empty session for `profile`.
+    pub fn new(profile: Profile) -> Self {
+        Self {
+            header: SessionHeader::new(profile),
+            records: Vec::new(),
+        }
+    }
+
+    /// The first two lines (magic with version, header).
+    fn header_text(header: &SessionHeader) -> String {
+        let json = serde_json::to_string(header).unwrap_or_else(|_| "{}".into());
+        format!("{MAGIC} {SESSION_VERSION}\nheader {json}\n")
+    }
+
+    /// The whole file's text.
+    pub fn to_text(&self) -> String {
+        let mut out = Self::header_text(&self.header);
+        for r in &self.records {
+            r.write_line(&mut out);
+        }
+        out.push_str(&format!("end {}\n", self.records.len()));
+        out
+    }
+
+    /// Writes the session atomically.
+    pub fn save(&self, path: &Path) -> Result<(), SessionError> {
+        crate::files::write_atomic(path, self.to_text().as_bytes()).map_err(|e| SessionError::Io {
+            path: e.path,
+            source: e.source,
+        })
+    }
+
+    /// Reads a session file.
+    pub fn load(path: &Path) -> Result<Self, SessionError> {
+        let bytes = std::fs::read(path).map_err(|source| SessionError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&bytes, path)
+    }
+
+    /// Parses session bytes; `path` names the file in errors. Never panics.
+    pub fn parse(bytes: &[u8], path: &Path) -> Result<Self, SessionError> {
+        let mut offset = 0usize;
+        let mut line_no = 0usize;
+        let mut header: Option<SessionHeader> = None;
+        let mut records = Vec::new();
+        let mut last_at = Duration::ZERO;
+        let mut ended = false;
+        while offset < bytes.len() {
+            line_no += 1;
+            let start = offset;
+            let corrupt = |message: String| SessionError::Corrupt {
+                path: path.to_path_buf(),
+                line: line_no,
+                offset: start,
+                message,
+            };
+            let rest = &bytes[start..];
+            let Some(nl) = rest.iter().position(|&b| b == b'\n') else {
+                return Err(corrupt(format!(
+                    "truncated: the last line has no end ({} bytes)",
+                    rest.len()
+                )));
+            };
+            offset = start + nl + 1;
+            let line = std::str::from_utf8(&rest[..nl])
+                .map_err(|e| corrupt(format!("not UTF-8 text ({e})")))?;
+            if ended {
+                return Err(corrupt("data after the `end` line".into()));
+            }
+            if line_no == 1 {
+                let version = line
+                    .strip_prefix(MAGIC)
+                    .and_then(|v| v.trim().parse::<u32>().ok())
+                    .ok_or_else(|| {
+                        corrupt(format!("not a leman session (expected `{MAGIC} N`)"))
+                    })?;
+                if version != SESSION_VERSION {
+                    return Err(corrupt(format!(
+                        "session format version {version} is not supported (this build reads \
+                         {SESSION_VERSION})"
+                    )));
+                }
+                continue;
+            }
+            if line_no == 2 {
+                let json = line
+                    .strip_prefix("header ")
+                    .ok_or_else(|| corrupt("expected the `header` line".into()))?;
+                let h: SessionHeader =
+                    serde_json::from_str(json).map_err(|e| corrupt(format!("bad header: {e}")))?;
+                h.profile
+                    .validate(path)
+                    .map_err(|e| corrupt(format!("bad profile in header: {e}")))?;
+                header = Some(h);
+                continue;
+            }
+            let devices = header.as_ref().map_or(0, |h| h.profile.devices.len());
+            let (tag, rest) = line.split_once(' ').unwrap_or((line, ""));
+            if tag == "end" {
+                let n: usize = rest
+                    .trim()
+                    .parse()
+                    .map_err(|_| corrupt(format!("bad record count {rest:?}")))?;
+                if n != records.len() {
+                    return Err(corrupt(format!(
+                        "the file says {n} records but holds {}: lines are missing or extra",
+                        records.len()
+                    )));
+                }
+                ended = true;
+                continue;
+            }
+            let mut fields = rest.splitn(3, ' ');
+            let at_ns: u64 = fields
+                .next()
+                .and_then(|t| t.parse().ok())
+                .ok_or_else(|| corrupt("bad or missing time".into()))?;
+            let at = Duration::from_nanos(at_ns);
+            if at < last_at {
+                return Err(corrupt(format!(
+                    "time goes backwards ({} ns after {} ns)",
+                    at_ns,
+                    last_at.as_nanos()
+                )));
+            }
+            last_at = at;
+            let mut device = || -> Result<usize, SessionError> {
+                let d: usize = fields
+                    .next()
+                    .and_then(|t| t.parse().ok())
+                    .ok_or_else(|| corrupt("bad or missing device index".into()))?;
+                if d >= devices {
+                    return Err(corrupt(format!(
+                        "device index {d} but the header has {devices} devices"
+                    )));
+                }
+                Ok(d)
+            };
+            let record = match tag {
+                "c" | "w" => {
+                    let device = device()?;
+                    let bytes = unhex(fields.next().unwrap_or("")).map_err(corrupt)?;
+                    if bytes.is_empty() {
+                        return Err(corrupt("empty chunk".into()));
+                    }
+                    if tag == "c" {
+                        Record::Chunk { at, device, bytes }
+                    } else {
+                        Record::Sent { at, device, bytes }
+                    }
+                }
+                "o" => Record::Opened {
+                    at,
+                    device: device()?,
+                },
+                "l" => {
+                    let device = device()?;
+                    let error: String = serde_json::from_str(fields.next().unwrap_or(""))
+                        .map_err(|e| corrupt(format!("bad lost reason: {e}")))?;
+                    Record::Lost { at, device, error }
+                }
+                "e" => {
+                    let json = [fields.next(), fields.next()]
+                        .into_iter()
+                        .flatten()
+                        .collect::<Vec<_>>()
+                        .join(" ");
+                    let event: DesktopEvent = serde_json::from_str(&json)
+                        .map_err(|e| corrupt(format!("bad desktop event: {e}")))?;
+                    Record::Desktop { at, event }
+                }
+                _ => return Err(corrupt(format!("unknown record type {tag:?}"))),
+            };
+            records.push(record);
+        }
+        let header = header.ok_or_else(|| SessionError::Corrupt {
+            path: path.to_path_buf(),
+            line: line_no.max(1),
+            offset: bytes.len(),
+            message: "truncated: no header".into(),
+        })?;
+        if !ended {
+            return Err(SessionError::Corrupt {
+                path: path.to_path_buf(),
+                line: line_no + 1,
+                offset: bytes.len(),
+                message: format!(
+                    "truncated: no `end` line after {} records (the recording was cut short)",
+                    records.len()
+                ),
+            });
+        }
+        Ok(Session { header, records })
+    }
+
+    /// The chunks of one device, in order.
+    pub fn chunks(&self, device: usize) -> impl Iterator<Item = (Duration, &[u8])> {
+        self.records.iter().filter_map(move |r| match r {
+            Record::Chunk {
+                at,
+                device: d,
+                bytes,
+            } if *d == device => Some((*at, bytes.as_slice())),
+            _ => None,
+        })
+    }
+
+    /// Time of the last record.
+    pub fn duration(&self) -> Duration {
+        self.records.last().map_or(Duration::ZERO, Record::at)
+    }
+}
+
+/// Streams a session to `<dir>/.<name>.partial` while recording and renames it over the target on
+/// [`SessionWriter::finish`], so the target is either absent/old or complete. If the program dies
+/// first, the partial file stays for inspection (it has no `end` line, so loading it fails with
+/// a clear "truncated" error).
+pub struct SessionWriter {
+    file: std::io::BufWriter<std::fs::File>,
+    partial: PathBuf,
+    target: PathBuf,
+    count: usize,
+    last_at: Duration,
+    line: String,
+}
+
+impl std::fmt::Debug for SessionWriter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SessionWriter")
+            .field("target", &self.target)
+            .field("count", &self.count)
+            .finish()
+    }
+}
+
+impl SessionWriter {
+    /// Starts a session file at `target` with `header`.
+    pub fn create(target: &Path, header: &SessionHeader) -> Result<Self, SessionError> {
+        let io = |source| SessionError::Io {
+            path: target.to_path_buf(),
+            source,
+        };
+        let dir = match target.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let name = target
+            .file_name()
+            .ok_or_else(|| io(std::io::Error::other("path has no file name")))?;
+        let mut partial_name = std::ffi::OsString::from(".");
+        partial_name.push(name);
+        partial_name.push(".partial");
+        let partial = dir.join(partial_name);
+        let file = std::fs::File::create(&partial).map_err(io)?;
+        let mut file = std::io::BufWriter::new(file);
+        file.write_all(Session::header_text(header).as_bytes())
+            .map_err(io)?;
+        Ok(Self {
+            file,
+            partial,
+            target: target.to_path_buf(),
+            count: 0,
+            last_at: Duration::ZERO,
+            line: String::new(),
+        })
+    }
+
+    /// Appends one record. A record earlier than the previous one is stored at the previous
+    /// time (times in a session never decrease).
+    pub fn write(&mut self, record: &Record) -> Result<(), SessionError> {
+        self.line.clear();
+        if record.at() < self.last_at {
+            let mut r = record.clone();
+            set_at(&mut r, self.last_at);
+            r.write_line(&mut self.line);
+        } else {
+            self.last_at = record.at();
+            record.write_line(&mut self.line);
+        }
+        self.file
+            .write_all(self.line.as_bytes())
+            .map_err(|source| SessionError::Io {
+                path: self.partial.clone(),
+                source,
+            })?;
+        self.count += 1;
+        Ok(())
+    }
+
+    /// Records written so far.
+    pub fn count(&self) -> usize {
+        self.count
+    }
+
+    /// Writes the `end` line, syncs and renames the file into place; returns the target path.
+    pub fn finish(mut self) -> Result<PathBuf, SessionError> {
+        let partial = self.partial.clone();
+        let io = |source| SessionError::Io {
+            path: partial.clone(),
+            source,
+        };
+        writeln!(self.file, "end {}", self.count).map_err(io)?;
+        let file = self.file.into_inner().map_err(|e| io(e.into_error()))?;
+        file.sync_all().map_err(io)?;
+        drop(file);
+        std::fs::rename(&self.partial, &self.target).map_err(|source| SessionError::Io {
+            path: self.target.clone(),
+            source,
+        })?;
+        Ok(self.target)
+    }
+}
+
+fn set_at(r: &mut Record, to: Duration) {
+    match r {
+        Record::Chunk { at, .. }
+        | Record::Sent { at, .. }
+        | Record::Opened { at, .. }
+        | Record::Lost { at, .. }
+        | Record::Desktop { at, .. } => *at = to,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Session {
+        let mut s = Session::new(Profile::desktop_default());
+        s.records = vec![
+            Record::Opened {
+                at: Duration::ZERO,
+                device: 0,
+            },
+            Record::Sent {
+                at: Duration::from_nanos(5),
+                device: 0,
+                bytes: b"\r@RESET\r".to_vec(),
+            },
+            Record::Chunk {
+                at: Duration::from_micros(2500),
+                device: 0,
+                bytes: vec![0, 1, 0xff, b'\n', b' '],
+            },
+            Record::Desktop {
+                at: Duration::from_millis(3),
+                event: DesktopEvent::Key {
+                    name: "a b".into(),
+                    pressed: true,
+                },
+            },
+            Record::Lost {
+                at: Duration::from_millis(9),
+                device: 0,
+                error: "gone \"away\"\nnow".into(),
+            },
+        ];
+        s
+    }
+
+    #[test]
+    fn text_round_trips_exactly() {
+        let s = sample();
+        let text = s.to_text();
+        let back = Session::parse(text.as_bytes(), Path::new("x.session")).expect("parse");
+        assert_eq!(back, s);
+        assert_eq!(back.to_text(), text);
+    }
+
+    #[test]
+    fn every_truncation_is_a_clear_error_and_never_a_panic() {
+        let text = sample().to_text();
+        let bytes = text.as_bytes();
+        for cut in 0..bytes.len() {
+            let err = Session::parse(&bytes[..cut], Path::new("cut.session"))
+                .expect_err("truncated must fail");
+            let msg = err.to_string();
+            assert!(msg.contains("cut.session"), "{msg}");
+            assert!(msg.contains("byte offset"), "{msg}");
+        }
+    }
+
+    #[test]
+    fn corruption_names_the_line_and_offset() {
+        let text = sample().to_text();
+        let cases = [
+            (
+                "c 2500000 0 0001ff0a20",
+                "c 2500000 0 0001fg0a20",
+                "hex digit",
+            ),
+            ("c 2500000 0 ", "c 2500000 7 ", "device index 7"),
+            ("c 2500000 0 ", "c 1 0 ", "time goes backwards"),
+            ("c 2500000 0 ", "x 2500000 0 ", "unknown record type"),
+            ("end 5", "end 4", "lines are missing"),
+        ];
+        for (from, to, expect) in cases {
+            assert!(text.contains(from), "{from}");
+            let bad = text.replacen(from, to, 1);
+            let err = Session::parse(bad.as_bytes(), Path::new("bad.session"))
+                .expect_err("corrupt must fail")
+                .to_string();
+            assert!(err.contains("bad.session"), "{err}");
+            assert!(err.contains(expect), "{err} lacks {expect}");
+            assert!(err.contains("line "), "{err}");
+        }
+        // The offset points at the start of the bad line.
+        let bad = text
+            .replacen("x", "x", 1)
+            .replacen("c 2500000", "c 25oo000", 1);
+        match Session::parse(bad.as_bytes(), Path::new("b")) {
+            Err(SessionError::Corrupt { offset, line, .. }) => {
+                assert_eq!(&bad.as_bytes()[offset..offset + 2], b"c ");
+                assert_eq!(line, 5);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_panic() {
+        use proptest::prelude::*;
+        let text = sample().to_text().into_bytes();
+        proptest!(ProptestConfig::with_cases(300), |(pos in 0usize..400, byte in any::<u8>(), junk in proptest::collection::vec(any::<u8>(), 0..64))| {
+            let mut b = text.clone();
+            let i = pos % b.len();
+            b[i] = byte;
+            let _ = Session::parse(&b, Path::new("p"));
+            let _ = Session::parse(&junk, Path::new("p"));
+        });
+    }
+
+    #[test]
+    fn writer_streams_then_renames_atomically() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("rec.session");
+        let s = sample();
+        let mut w = SessionWriter::create(&target, &s.header).expect("create");
+        for r in &s.records {
+            w.write(r).expect("write");
+        }
+        assert!(!target.exists(), "target appears only on finish");
+        let path = w.finish().expect("finish");
+        assert_eq!(path, target);
+        assert_eq!(Session::load(&target).expect("load"), s);
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+    }
+}
