@@ -2,14 +2,24 @@
 //! transports (serial, HID, UDP, replay), recording and the hub sit at the edge.
 
 pub mod decoder;
+#[cfg(test)]
+mod decoder_props;
+pub mod desktop;
+pub mod driver;
 pub mod encode;
 pub mod fastrak;
+pub mod hub;
 pub mod logitech;
 pub mod magellan;
 pub mod opentrack;
+pub mod profile;
 pub mod protocol;
+pub mod replay;
 pub mod sample;
+pub mod sample_sessions;
+pub mod session;
 pub mod spaceball;
 pub mod spacemouse_hid;
 #[cfg(test)]
 mod test_util;
+pub mod transport;
