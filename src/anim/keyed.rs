@@ -9,6 +9,7 @@ use crate::character::skeleton::{Posture, Skeleton};
 /// A key posture at a time, with its spline shape parameters (each in [−1, 1], default 0 =
 /// Catmull-Rom).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct KeyPosture {
     /// Time of the key, seconds.
     pub time_s: f32,
@@ -56,6 +57,7 @@ pub enum Extrapolation {
 
 /// A named keyed motion of a skeleton.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Motion {
     /// Name (unique within a character), e.g. "bend".
     pub name: String,

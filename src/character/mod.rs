@@ -13,6 +13,9 @@
 //! world from [`ShapeInstance::rest_point_to_world`]; fixed skin rows from
 //! [`Character::boundary_positions_into`].
 
+pub mod examples;
+pub mod file;
+pub mod resample;
 pub mod shape;
 pub mod skeleton;
 pub mod skin;
@@ -22,17 +25,19 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 pub use crate::anim::keyed::{Extrapolation, KeyPosture, Motion};
+pub use file::{CharacterFileError, FORMAT_VERSION};
 pub use shape::{
     Deformation, PROJECTION_TOLERANCE_M, Param, ParamKey, Primitive, Resolved, Shape,
     ShapeGeometry, ShapeId, ShapeInstance,
 };
 pub use skeleton::{Dof, DofRef, Joint, JointId, Posture, Skeleton, SkeletonPose};
 pub use skin::{Skin, Sym2};
-pub use tissue::TissueSpring;
+pub use tissue::{AttachParams, TissueSpring, attach_global};
 
 /// Default simulation parameters stored with a character (the simulator may override them).
 /// Symbols refer to paper `003_…` section 4.2.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SimulationDefaults {
     /// Gravity g, m/s² (world frame; +Y is up).
     pub gravity_m_per_s2: Vec3,

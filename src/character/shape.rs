@@ -91,6 +91,7 @@ pub enum Primitive {
 
 /// One key of a keyed parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ParamKey {
     /// Time, seconds.
     pub time_s: f32,
@@ -702,6 +703,7 @@ impl ShapeGeometry {
 
 /// A muscle or bone shape attached to a joint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Shape {
     /// Name (unique within the character).
     pub name: String,

@@ -31,6 +31,7 @@ impl JointId {
 
 /// One rotational degree of freedom: a rotation about `axis` limited to `[min_rad, max_rad]`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Dof {
     /// Rotation axis (unit vector) in the joint's frame before this rotation (see module docs).
     pub axis: Vec3,
@@ -61,10 +62,12 @@ pub const MAX_DOFS_PER_JOINT: usize = 3;
 
 /// A joint of the articulated figure.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Joint {
     /// Unique name (used by files, tools and the UI).
     pub name: String,
     /// Parent joint; `None` only for the root (joint 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub parent: Option<JointId>,
     /// Position of this joint's origin in its parent's frame, metres (world frame for the root).
     pub offset_m: Vec3,
@@ -81,6 +84,7 @@ pub struct Skeleton {
 
 /// Where one degree of freedom lives: its joint and its index among that joint's dofs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DofRef {
     /// The joint.
     pub joint: JointId,
@@ -92,6 +96,7 @@ pub struct DofRef {
 ///
 /// `angles_rad` is flat: joint 0's dofs first, then joint 1's, … (see [`Skeleton::dof_index`]).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Posture {
     /// Translation added to the root's offset, world frame, metres.
     pub root_translation_m: Vec3,

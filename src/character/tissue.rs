@@ -71,3 +71,129 @@ mod tests {
         assert_eq!(f, Vec3::ZERO);
     }
 }
+
+/// Parameters of the global "attach" command (paper section 6.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttachParams {
+    /// k_s of every new spring, N/m.
+    pub stiffness_n_per_m: f32,
+    /// k_d of every new spring, N·s/m.
+    pub damping_n_s_per_m: f32,
+    /// Rest length = this × the distance from the skin point to its anchor at attach time
+    /// (1 = slack until the skin moves further away than it is now).
+    pub rest_length_scale: f32,
+    /// How far along the inward normal to look for a muscle surface, metres; beyond that the
+    /// nearest surface point is used.
+    pub max_ray_m: f32,
+}
+
+/// Finds the anchor for one skin point: the first muscle surface hit along the inward normal
+/// (`-normal`) within `max_ray_m`, else the nearest surface point of any shape. Returns the
+/// shape, the anchor in that shape's rest space and the distance (metres). `None` only when
+/// there are no shapes.
+pub fn anchor_for_point(
+    instances: &[super::shape::ShapeInstance],
+    point_world: Vec3,
+    outward_normal: Vec3,
+    max_ray_m: f32,
+) -> Option<(ShapeId, Vec3, f32)> {
+    const STEP_M: f32 = 0.002;
+    let dir = -outward_normal.normalize_or_zero();
+    // Shapes whose bounding sphere meets the ray segment.
+    let near_ray = |inst: &super::shape::ShapeInstance| {
+        let to_c = inst.bound_center_world_m - point_world;
+        let t = to_c.dot(dir).clamp(0.0, max_ray_m);
+        (point_world + dir * t - inst.bound_center_world_m).length() <= inst.bound_radius_m
+    };
+    if dir != Vec3::ZERO && max_ray_m > 0.0 {
+        let steps = (max_ray_m / STEP_M).ceil() as u32;
+        let mut best: Option<(usize, f32)> = None;
+        for (k, inst) in instances.iter().enumerate() {
+            if !near_ray(inst) {
+                continue;
+            }
+            // First t with F < 0 along the ray, refined by bisection.
+            let mut prev_t = 0.0;
+            if inst.value_world(point_world) < 0.0 {
+                continue; // starts inside this shape: not a surface below the skin
+            }
+            for s in 1..=steps {
+                let t = (s as f32 * STEP_M).min(max_ray_m);
+                if best.is_some_and(|(_, bt)| t > bt) {
+                    break;
+                }
+                if inst.value_world(point_world + dir * t) < 0.0 {
+                    let (mut lo, mut hi) = (prev_t, t);
+                    for _ in 0..30 {
+                        let mid = 0.5 * (lo + hi);
+                        if inst.value_world(point_world + dir * mid) < 0.0 {
+                            hi = mid;
+                        } else {
+                            lo = mid;
+                        }
+                    }
+                    let hit_t = 0.5 * (lo + hi);
+                    if best.is_none_or(|(_, bt)| hit_t < bt) {
+                        best = Some((k, hit_t));
+                    }
+                    break;
+                }
+                prev_t = t;
+            }
+        }
+        if let Some((k, t)) = best {
+            let inst = &instances[k];
+            // Put the anchor exactly on the surface.
+            let on_surface = inst.project_world(point_world + dir * t);
+            let rest = inst.geometry.undeform(inst.to_shape(on_surface));
+            return Some((ShapeId(k as u32), rest, (on_surface - point_world).length()));
+        }
+    }
+    let mut best: Option<(usize, Vec3, f32)> = None;
+    for (k, inst) in instances.iter().enumerate() {
+        let q = inst.project_world(point_world);
+        let d = (q - point_world).length();
+        if best.is_none_or(|(_, _, bd)| d < bd) {
+            best = Some((k, q, d));
+        }
+    }
+    best.map(|(k, q, d)| {
+        let inst = &instances[k];
+        (
+            ShapeId(k as u32),
+            inst.geometry.undeform(inst.to_shape(q)),
+            d,
+        )
+    })
+}
+
+/// The global "attach" command: one spring per skin point (fixed rows included) from the
+/// point's neutral-posture position to the muscle surface below it along its inward normal
+/// (else the nearest muscle surface point), with the given parameters. Empty if the character
+/// has no shapes.
+pub fn attach_global(character: &super::Character, params: &AttachParams) -> Vec<TissueSpring> {
+    let skeleton = &character.skeleton;
+    let posture = super::Posture::neutral(skeleton);
+    let pose = skeleton.forward_kinematics(&posture);
+    let mut instances = Vec::new();
+    character.shape_instances_into(&posture, &pose, 0.0, &mut instances);
+    let mut normals = Vec::new();
+    let skin = &character.skin;
+    skin.outward_normals(&skin.positions_m, &mut normals);
+    let mut springs = Vec::with_capacity(skin.point_count());
+    for (k, (p, n)) in skin.positions_m.iter().zip(&normals).enumerate() {
+        if let Some((shape, anchor, distance)) =
+            anchor_for_point(&instances, *p, *n, params.max_ray_m)
+        {
+            springs.push(TissueSpring {
+                skin_point: k as u32,
+                shape,
+                anchor_rest_m: anchor,
+                stiffness_n_per_m: params.stiffness_n_per_m,
+                damping_n_s_per_m: params.damping_n_s_per_m,
+                rest_length_m: distance * params.rest_length_scale,
+            });
+        }
+    }
+    springs
+}

@@ -1,0 +1,1280 @@
+//! The example characters, built in code: a penguin (7 spheres), a wombat (2 spheres, 5
+//! superellipsoids, 1 cylinder) and a torso (26 spheres, 12 superellipsoids, 2 cylinders)
+//! modelled on Table 1 of the LEMAN paper, and an arm for comparison with other simulators.
+//!
+//! The files in `assets/characters/` are exactly [`Character::to_toml_string`] of these (a test
+//! checks it); regenerate them with `cargo run --example make_characters`.
+//!
+//! Materials live in one place, [`materials`]: change them there and regenerate.
+
+use std::f32::consts::{FRAC_PI_2, PI, TAU};
+use std::path::Path;
+
+use glam::{Quat, Vec3};
+
+use super::shape::{Deformation, Param, Primitive, Shape, ShapeInstance};
+use super::skeleton::{Dof, DofRef, Joint, JointId, Posture, Skeleton};
+use super::skin::Skin;
+use super::tissue::{AttachParams, attach_global};
+use super::{Character, CharacterFileError, Extrapolation, KeyPosture, Motion, SimulationDefaults};
+use crate::pose::Pose;
+
+/// The example characters' names, in the order [`build`] knows them.
+pub const NAMES: [&str; 4] = ["penguin", "wombat", "torso", "arm"];
+
+/// Skin resolutions written for each example: the full one (file `NAME.toml`) and the coarse one
+/// (file `NAME_16.toml`).
+pub const RESOLUTIONS: [(u32, &str); 2] = [(32, ""), (16, "_16")];
+
+/// The material choices of one example character (the one place to tune them).
+///
+/// Point values are derived from these so that they mean the same at any resolution:
+/// `mass_kg = skin_mass_kg / (M·N)`; the stretch elasticity η (a material constant, the same
+/// at every resolution) is chosen so that the linearised stretch stiffness of one point at
+/// 32×32, `k ≈ 8·η_ii·G⁰_ii·h_j/h_i` (from the energy `η(G−G⁰)²` with forward differences and
+/// forces `= density × h₁h₂`), gives `√(k/m) = stretch_omega_rad_per_s`. At 16×16 the points
+/// are four times heavier and the frequency halves, as for any coarser membrane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Materials {
+    /// Total skin mass, kg.
+    pub skin_mass_kg: f32,
+    /// Angular frequency of one skin point against its neighbours' stretch springs at 32×32,
+    /// rad/s (sets η). Adaptive explicit steps are limited near 2/(2·ω).
+    pub stretch_omega_rad_per_s: f32,
+    /// Shear elasticity η₁₂ as a fraction of the mean of η₁₁ and η₂₂.
+    pub shear_fraction: f32,
+    /// Bending ξ (all three components), N/m (0 = a pure membrane).
+    pub bending: f32,
+    /// Point damping γ / point mass, 1/s.
+    pub damping_per_s: f32,
+    /// Tissue spring angular frequency √(k_s/m), rad/s (sets k_s per point).
+    pub tissue_omega_rad_per_s: f32,
+    /// Tissue spring damping ratio (sets k_d = 2ζ√(k_s m)).
+    pub tissue_damping_ratio: f32,
+    /// Rest metric = initial metric × this² (below 1: the skin is under slight tension).
+    pub rest_shrink: f32,
+}
+
+/// The materials of each example character (see [`Materials`]).
+pub fn materials(name: &str) -> Materials {
+    let base = Materials {
+        skin_mass_kg: 1.0,
+        stretch_omega_rad_per_s: 120.0,
+        shear_fraction: 0.5,
+        bending: 0.0,
+        damping_per_s: 2.0,
+        tissue_omega_rad_per_s: 40.0,
+        tissue_damping_ratio: 0.3,
+        rest_shrink: 0.95,
+    };
+    match name {
+        "penguin" => Materials {
+            skin_mass_kg: 1.2,
+            ..base
+        },
+        "wombat" => Materials {
+            skin_mass_kg: 1.5,
+            stretch_omega_rad_per_s: 110.0,
+            ..base
+        },
+        "torso" => Materials {
+            skin_mass_kg: 2.0,
+            stretch_omega_rad_per_s: 130.0,
+            tissue_omega_rad_per_s: 45.0,
+            ..base
+        },
+        _ => Materials {
+            skin_mass_kg: 0.5,
+            ..base
+        },
+    }
+}
+
+/// Builds one example character at an `around × along` skin resolution.
+pub fn build(name: &str, around: u32, along: u32) -> Option<Character> {
+    let body = match name {
+        "penguin" => penguin(),
+        "wombat" => wombat(),
+        "torso" => torso(),
+        "arm" => arm(),
+        _ => return None,
+    };
+    Some(finish(body, around, along))
+}
+
+/// Writes every example at every resolution into `dir` (atomically), returning the paths.
+pub fn write_all(dir: &Path) -> Result<Vec<std::path::PathBuf>, CharacterFileError> {
+    let mut written = Vec::new();
+    for name in NAMES {
+        for (res, suffix) in RESOLUTIONS {
+            let Some(c) = build(name, res, res) else {
+                continue;
+            };
+            let path = dir.join(format!("{name}{suffix}.toml"));
+            c.save(&path)?;
+            written.push(path);
+        }
+    }
+    Ok(written)
+}
+
+/// A body before its skin is made.
+struct Body {
+    name: &'static str,
+    skeleton: Skeleton,
+    shapes: Vec<Shape>,
+    motions: Vec<Motion>,
+    tube: Tube,
+    simulation: SimulationDefaults,
+}
+
+/// How to wrap the skin: a straight axis from `start_m` (carried by `bottom_joint`) to
+/// `end_m` (carried by `top_joint`), world frame at the neutral posture.
+struct Tube {
+    bottom_joint: JointId,
+    top_joint: JointId,
+    start_m: Vec3,
+    end_m: Vec3,
+    /// A unit vector perpendicular to the axis: direction of angle 0 around.
+    zero_dir: Vec3,
+    radius: Radius,
+    /// Fat thickness as a function of (s along in [0, 1], angle around in radians), metres.
+    fat_m: fn(f32, f32) -> f32,
+}
+
+enum Radius {
+    /// A tube of fixed radius (the arm).
+    Constant(f32),
+    /// Shrink-wrapped: outermost muscle surface + fat + margin; end rings of the given radius
+    /// (`None`: shrink-wrapped too).
+    Wrap { end_radius_m: Option<f32> },
+}
+
+const WRAP_MARGIN_M: f32 = 0.003;
+const MIN_RADIUS_M: f32 = 0.01;
+
+struct SkeletonBuilder {
+    joints: Vec<Joint>,
+}
+
+impl SkeletonBuilder {
+    fn new() -> Self {
+        Self { joints: Vec::new() }
+    }
+
+    fn joint(
+        &mut self,
+        name: &str,
+        parent: Option<JointId>,
+        offset_m: Vec3,
+        dofs: &[Dof],
+    ) -> JointId {
+        self.joints.push(Joint {
+            name: name.to_string(),
+            parent,
+            offset_m,
+            dofs: dofs.to_vec(),
+        });
+        JointId(self.joints.len() as u32 - 1)
+    }
+
+    fn build(self) -> Skeleton {
+        Skeleton {
+            joints: self.joints,
+        }
+    }
+}
+
+fn dof(axis: Vec3, min_deg: f32, max_deg: f32) -> Dof {
+    Dof::new(axis, min_deg.to_radians(), max_deg.to_radians())
+}
+
+fn sphere(name: &str, joint: JointId, at_m: Vec3, radius_m: f32) -> Shape {
+    Shape {
+        name: name.to_string(),
+        joint,
+        joint_from_shape: Pose::from_translation(at_m),
+        primitive: Primitive::Sphere { radius_m },
+        deformations: Vec::new(),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn superellipsoid(
+    name: &str,
+    joint: JointId,
+    at_m: Vec3,
+    rotation: Quat,
+    radii_m: Vec3,
+    e1: f32,
+    e2: f32,
+    deformations: Vec<Deformation>,
+) -> Shape {
+    Shape {
+        name: name.to_string(),
+        joint,
+        joint_from_shape: Pose::new(at_m, rotation),
+        primitive: Primitive::Superellipsoid { radii_m, e1, e2 },
+        deformations,
+    }
+}
+
+fn cylinder(
+    name: &str,
+    joint: JointId,
+    at_m: Vec3,
+    rotation: Quat,
+    radius_m: f32,
+    half_length_m: f32,
+) -> Shape {
+    Shape {
+        name: name.to_string(),
+        joint,
+        joint_from_shape: Pose::new(at_m, rotation),
+        primitive: Primitive::Cylinder {
+            radius_m,
+            half_length_m,
+        },
+        deformations: Vec::new(),
+    }
+}
+
+fn flex(joint: JointId, dof_index: u8, offset: f32, gain: f32) -> Param {
+    Param::JointAngle {
+        dof: DofRef {
+            joint,
+            dof: dof_index,
+        },
+        offset,
+        gain,
+    }
+}
+
+/// A key posture from (dof index, angle in degrees) pairs and a root translation.
+fn key(skeleton: &Skeleton, time_s: f32, root_m: Vec3, angles_deg: &[(usize, f32)]) -> KeyPosture {
+    let mut posture = Posture::neutral(skeleton);
+    posture.root_translation_m = root_m;
+    for &(k, deg) in angles_deg {
+        if let Some(a) = posture.angles_rad.get_mut(k) {
+            *a = deg.to_radians();
+        }
+    }
+    KeyPosture::new(time_s, posture)
+}
+
+fn dof_at(skeleton: &Skeleton, joint: JointId, d: u8) -> usize {
+    skeleton
+        .dof_index(DofRef { joint, dof: d })
+        .unwrap_or(usize::MAX)
+}
+
+// ----------------------------------------------------------------------------------------
+// Penguin: 7 spheres.
+
+fn penguin() -> Body {
+    let mut b = SkeletonBuilder::new();
+    let pelvis = b.joint(
+        "pelvis",
+        None,
+        Vec3::new(0.0, 0.15, 0.0),
+        &[dof(Vec3::Z, -25.0, 25.0), dof(Vec3::Y, -45.0, 45.0)],
+    );
+    let chest = b.joint(
+        "chest",
+        Some(pelvis),
+        Vec3::new(0.0, 0.2, 0.0),
+        &[dof(Vec3::X, -30.0, 30.0), dof(Vec3::Z, -20.0, 20.0)],
+    );
+    let head = b.joint(
+        "head",
+        Some(chest),
+        Vec3::new(0.0, 0.2, 0.0),
+        &[dof(Vec3::Y, -60.0, 60.0), dof(Vec3::X, -30.0, 30.0)],
+    );
+    let left = b.joint(
+        "left_flipper",
+        Some(chest),
+        Vec3::new(0.11, 0.06, 0.0),
+        &[dof(Vec3::Z, -10.0, 70.0)],
+    );
+    let right = b.joint(
+        "right_flipper",
+        Some(chest),
+        Vec3::new(-0.11, 0.06, 0.0),
+        &[dof(Vec3::Z, -70.0, 10.0)],
+    );
+    let skeleton = b.build();
+    let shapes = vec![
+        sphere("belly", pelvis, Vec3::new(0.0, 0.03, 0.015), 0.14),
+        sphere("tail", pelvis, Vec3::new(0.0, -0.06, -0.05), 0.08),
+        sphere("chest", chest, Vec3::new(0.0, 0.02, 0.0), 0.115),
+        sphere("head", head, Vec3::new(0.0, 0.03, 0.0), 0.075),
+        sphere("beak", head, Vec3::new(0.0, 0.02, 0.075), 0.03),
+        sphere("left_flipper", left, Vec3::new(0.025, -0.09, 0.0), 0.045),
+        sphere("right_flipper", right, Vec3::new(-0.025, -0.09, 0.0), 0.045),
+    ];
+    let s = &skeleton;
+    let (sway, turn) = (dof_at(s, pelvis, 0), dof_at(s, pelvis, 1));
+    let (lean, tilt) = (dof_at(s, chest, 0), dof_at(s, chest, 1));
+    let (yaw, nod) = (dof_at(s, head, 0), dof_at(s, head, 1));
+    let (fl, fr) = (dof_at(s, left, 0), dof_at(s, right, 0));
+    let up = Vec3::new(0.0, 0.015, 0.0);
+    let waddle = Motion {
+        name: "waddle".into(),
+        keys: vec![
+            key(s, 0.0, Vec3::ZERO, &[]),
+            key(
+                s,
+                0.5,
+                up,
+                &[
+                    (sway, 15.0),
+                    (turn, 10.0),
+                    (tilt, -8.0),
+                    (yaw, -20.0),
+                    (fl, 45.0),
+                    (fr, -10.0),
+                    (lean, 5.0),
+                ],
+            ),
+            key(s, 1.0, Vec3::ZERO, &[(nod, 10.0), (fl, 10.0), (fr, -10.0)]),
+            key(
+                s,
+                1.5,
+                up,
+                &[
+                    (sway, -15.0),
+                    (turn, -10.0),
+                    (tilt, 8.0),
+                    (yaw, 20.0),
+                    (fl, 10.0),
+                    (fr, -45.0),
+                    (lean, 5.0),
+                ],
+            ),
+            key(s, 2.0, Vec3::ZERO, &[]),
+        ],
+        extrapolation: Extrapolation::Loop,
+    };
+    let flap = Motion {
+        name: "flap".into(),
+        keys: vec![
+            key(s, 0.0, Vec3::ZERO, &[]),
+            key(s, 0.3, Vec3::ZERO, &[(fl, 65.0), (fr, -65.0), (nod, -15.0)]),
+            key(s, 0.6, Vec3::ZERO, &[]),
+        ],
+        extrapolation: Extrapolation::Loop,
+    };
+    Body {
+        name: "penguin",
+        skeleton,
+        shapes,
+        motions: vec![waddle, flap],
+        tube: Tube {
+            bottom_joint: pelvis,
+            top_joint: head,
+            start_m: Vec3::new(0.0, 0.0, 0.0),
+            end_m: Vec3::new(0.0, 0.655, 0.0),
+            zero_dir: Vec3::X,
+            radius: Radius::Wrap {
+                end_radius_m: Some(0.012),
+            },
+            fat_m: |s, angle| 0.015 + 0.01 * (PI * s).sin() * (0.5 + 0.5 * angle.sin()),
+        },
+        simulation: SimulationDefaults::default(),
+    }
+}
+
+// ----------------------------------------------------------------------------------------
+// Wombat: 2 spheres, 5 superellipsoids, 1 cylinder. The body lies along +Z (nose forward).
+
+fn wombat() -> Body {
+    let mut b = SkeletonBuilder::new();
+    let hips = b.joint(
+        "hips",
+        None,
+        Vec3::new(0.0, 0.2, -0.2),
+        &[dof(Vec3::X, -15.0, 15.0), dof(Vec3::Z, -15.0, 15.0)],
+    );
+    let spine = b.joint(
+        "spine",
+        Some(hips),
+        Vec3::new(0.0, 0.01, 0.17),
+        &[dof(Vec3::X, -25.0, 25.0), dof(Vec3::Y, -30.0, 30.0)],
+    );
+    let shoulders = b.joint(
+        "shoulders",
+        Some(spine),
+        Vec3::new(0.0, 0.0, 0.17),
+        &[dof(Vec3::X, -20.0, 20.0), dof(Vec3::Y, -25.0, 25.0)],
+    );
+    let head = b.joint(
+        "head",
+        Some(shoulders),
+        Vec3::new(0.0, 0.02, 0.16),
+        &[dof(Vec3::X, -30.0, 30.0), dof(Vec3::Y, -45.0, 45.0)],
+    );
+    let skeleton = b.build();
+    let forward = Quat::from_rotation_x(FRAC_PI_2); // shape +Y along +Z
+    let shapes = vec![
+        superellipsoid(
+            "rump",
+            hips,
+            Vec3::new(0.0, 0.0, -0.02),
+            forward,
+            Vec3::new(0.14, 0.12, 0.12),
+            0.8,
+            0.8,
+            vec![],
+        ),
+        superellipsoid(
+            "belly",
+            spine,
+            Vec3::ZERO,
+            forward,
+            Vec3::new(0.15, 0.13, 0.13),
+            0.9,
+            0.9,
+            // A flexing muscle: the belly curls with the spine's pitch.
+            vec![Deformation::Bend {
+                curvature_per_m: flex(spine, 0, 0.0, -2.5),
+            }],
+        ),
+        superellipsoid(
+            "chest",
+            shoulders,
+            Vec3::new(0.0, 0.0, 0.0),
+            forward,
+            Vec3::new(0.13, 0.11, 0.12),
+            0.85,
+            1.0,
+            vec![Deformation::Twist {
+                rate_rad_per_m: flex(shoulders, 1, 0.0, 3.0),
+            }],
+        ),
+        superellipsoid(
+            "head",
+            head,
+            Vec3::new(0.0, 0.0, 0.04),
+            forward,
+            Vec3::new(0.09, 0.1, 0.08),
+            0.7,
+            1.0,
+            vec![Deformation::Taper {
+                rate_per_m: Param::constant(-2.5),
+            }],
+        ),
+        superellipsoid(
+            "snout",
+            head,
+            Vec3::new(0.0, -0.01, 0.13),
+            forward,
+            Vec3::new(0.045, 0.035, 0.04),
+            1.0,
+            1.0,
+            vec![],
+        ),
+        sphere("left_haunch", hips, Vec3::new(0.1, -0.05, -0.02), 0.07),
+        sphere("right_haunch", hips, Vec3::new(-0.1, -0.05, -0.02), 0.07),
+        cylinder(
+            "neck",
+            shoulders,
+            Vec3::new(0.0, 0.01, 0.1),
+            forward,
+            0.075,
+            0.05,
+        ),
+    ];
+    let s = &skeleton;
+    let (hp, hr) = (dof_at(s, hips, 0), dof_at(s, hips, 1));
+    let (sp, sy) = (dof_at(s, spine, 0), dof_at(s, spine, 1));
+    let (cp, cy) = (dof_at(s, shoulders, 0), dof_at(s, shoulders, 1));
+    let (np, ny) = (dof_at(s, head, 0), dof_at(s, head, 1));
+    let sniff = Motion {
+        name: "sniff".into(),
+        keys: vec![
+            key(s, 0.0, Vec3::ZERO, &[]),
+            key(
+                s,
+                0.6,
+                Vec3::new(0.0, 0.0, 0.01),
+                &[(sp, 15.0), (cp, 10.0), (np, 25.0), (hp, -5.0)],
+            ),
+            key(
+                s,
+                1.2,
+                Vec3::ZERO,
+                &[(sy, 20.0), (cy, 15.0), (ny, 35.0), (hr, 5.0)],
+            ),
+            key(
+                s,
+                1.8,
+                Vec3::new(0.0, 0.0, 0.01),
+                &[
+                    (sy, -20.0),
+                    (cy, -15.0),
+                    (ny, -35.0),
+                    (sp, -10.0),
+                    (hr, -5.0),
+                ],
+            ),
+            key(s, 2.4, Vec3::ZERO, &[]),
+        ],
+        extrapolation: Extrapolation::Loop,
+    };
+    Body {
+        name: "wombat",
+        skeleton,
+        shapes,
+        motions: vec![sniff],
+        tube: Tube {
+            bottom_joint: hips,
+            top_joint: head,
+            start_m: Vec3::new(0.0, 0.2, -0.36),
+            end_m: Vec3::new(0.0, 0.22, 0.345),
+            zero_dir: Vec3::X,
+            radius: Radius::Wrap {
+                end_radius_m: Some(0.012),
+            },
+            fat_m: |s, angle| 0.012 + 0.008 * (PI * s).sin() * (0.5 - 0.5 * angle.sin()),
+        },
+        simulation: SimulationDefaults::default(),
+    }
+}
+
+// ----------------------------------------------------------------------------------------
+// Torso: 26 spheres, 12 superellipsoids, 2 cylinders; a trunk from the hips to the neck.
+
+fn torso() -> Body {
+    let mut b = SkeletonBuilder::new();
+    let pelvis = b.joint(
+        "pelvis",
+        None,
+        Vec3::new(0.0, 0.95, 0.0),
+        &[dof(Vec3::X, -10.0, 10.0)],
+    );
+    let lumbar = b.joint(
+        "lumbar",
+        Some(pelvis),
+        Vec3::new(0.0, 0.12, 0.0),
+        &[
+            dof(Vec3::X, -20.0, 35.0),
+            dof(Vec3::Z, -20.0, 20.0),
+            dof(Vec3::Y, -30.0, 30.0),
+        ],
+    );
+    let thorax = b.joint(
+        "thorax",
+        Some(lumbar),
+        Vec3::new(0.0, 0.17, 0.0),
+        &[
+            dof(Vec3::X, -15.0, 25.0),
+            dof(Vec3::Z, -15.0, 15.0),
+            dof(Vec3::Y, -25.0, 25.0),
+        ],
+    );
+    let neck = b.joint(
+        "neck",
+        Some(thorax),
+        Vec3::new(0.0, 0.22, -0.01),
+        &[dof(Vec3::X, -30.0, 30.0), dof(Vec3::Y, -50.0, 50.0)],
+    );
+    let lsh = b.joint(
+        "left_shoulder",
+        Some(thorax),
+        Vec3::new(0.15, 0.17, 0.0),
+        &[dof(Vec3::Z, -10.0, 25.0)],
+    );
+    let rsh = b.joint(
+        "right_shoulder",
+        Some(thorax),
+        Vec3::new(-0.15, 0.17, 0.0),
+        &[dof(Vec3::Z, -25.0, 10.0)],
+    );
+    let skeleton = b.build();
+    let id = Quat::IDENTITY;
+    let sideways = Quat::from_rotation_z(-FRAC_PI_2); // shape +Y along +X
+    let mut shapes = vec![
+        // 12 superellipsoids.
+        superellipsoid(
+            "pelvis_block",
+            pelvis,
+            Vec3::new(0.0, -0.02, 0.0),
+            id,
+            Vec3::new(0.15, 0.08, 0.1),
+            0.6,
+            0.9,
+            vec![],
+        ),
+        superellipsoid(
+            "left_glute",
+            pelvis,
+            Vec3::new(0.07, -0.03, -0.06),
+            id,
+            Vec3::new(0.075, 0.08, 0.06),
+            0.9,
+            1.0,
+            vec![],
+        ),
+        superellipsoid(
+            "right_glute",
+            pelvis,
+            Vec3::new(-0.07, -0.03, -0.06),
+            id,
+            Vec3::new(0.075, 0.08, 0.06),
+            0.9,
+            1.0,
+            vec![],
+        ),
+        superellipsoid(
+            "abdomen",
+            lumbar,
+            Vec3::new(0.0, 0.0, 0.04),
+            id,
+            Vec3::new(0.1, 0.13, 0.07),
+            0.8,
+            1.0,
+            // Rectus abdominis: curls when the trunk bends forward.
+            vec![Deformation::Bend {
+                curvature_per_m: flex(lumbar, 0, 0.0, -2.0),
+            }],
+        ),
+        superellipsoid(
+            "left_oblique",
+            lumbar,
+            Vec3::new(0.08, 0.0, 0.0),
+            id,
+            Vec3::new(0.06, 0.12, 0.08),
+            0.9,
+            1.0,
+            vec![Deformation::Twist {
+                rate_rad_per_m: flex(lumbar, 2, 0.0, 2.0),
+            }],
+        ),
+        superellipsoid(
+            "right_oblique",
+            lumbar,
+            Vec3::new(-0.08, 0.0, 0.0),
+            id,
+            Vec3::new(0.06, 0.12, 0.08),
+            0.9,
+            1.0,
+            vec![Deformation::Twist {
+                rate_rad_per_m: flex(lumbar, 2, 0.0, 2.0),
+            }],
+        ),
+        superellipsoid(
+            "lower_back",
+            lumbar,
+            Vec3::new(0.0, 0.0, -0.04),
+            id,
+            Vec3::new(0.09, 0.12, 0.05),
+            0.8,
+            1.0,
+            vec![],
+        ),
+        superellipsoid(
+            "ribcage",
+            thorax,
+            Vec3::new(0.0, 0.06, 0.0),
+            id,
+            Vec3::new(0.14, 0.17, 0.1),
+            0.9,
+            1.0,
+            vec![Deformation::Taper {
+                rate_per_m: Param::constant(-0.6),
+            }],
+        ),
+        superellipsoid(
+            "left_pectoral",
+            thorax,
+            Vec3::new(0.07, 0.12, 0.06),
+            id,
+            Vec3::new(0.07, 0.05, 0.045),
+            0.8,
+            1.0,
+            vec![],
+        ),
+        superellipsoid(
+            "right_pectoral",
+            thorax,
+            Vec3::new(-0.07, 0.12, 0.06),
+            id,
+            Vec3::new(0.07, 0.05, 0.045),
+            0.8,
+            1.0,
+            vec![],
+        ),
+        superellipsoid(
+            "left_latissimus",
+            thorax,
+            Vec3::new(0.1, 0.04, -0.04),
+            id,
+            Vec3::new(0.06, 0.12, 0.06),
+            1.0,
+            1.0,
+            vec![Deformation::Taper {
+                rate_per_m: flex(lsh, 0, 1.0, 1.5),
+            }],
+        ),
+        superellipsoid(
+            "right_latissimus",
+            thorax,
+            Vec3::new(-0.1, 0.04, -0.04),
+            id,
+            Vec3::new(0.06, 0.12, 0.06),
+            1.0,
+            1.0,
+            vec![Deformation::Taper {
+                rate_per_m: flex(rsh, 0, 1.0, -1.5),
+            }],
+        ),
+        // 2 cylinders: the collar bones.
+        cylinder(
+            "left_clavicle",
+            lsh,
+            Vec3::new(-0.07, 0.0, 0.05),
+            sideways,
+            0.018,
+            0.07,
+        ),
+        cylinder(
+            "right_clavicle",
+            rsh,
+            Vec3::new(0.07, 0.0, 0.05),
+            sideways,
+            0.018,
+            0.07,
+        ),
+    ];
+    // 26 spheres: 12 vertebrae, then pairs.
+    for k in 0..5 {
+        shapes.push(sphere(
+            &format!("vertebra_{k}"),
+            lumbar,
+            Vec3::new(0.0, -0.06 + 0.035 * k as f32, -0.085),
+            0.018,
+        ));
+    }
+    for k in 0..7 {
+        shapes.push(sphere(
+            &format!("vertebra_{}", k + 5),
+            thorax,
+            Vec3::new(0.0, -0.0 + 0.035 * k as f32, -0.1 + 0.004 * k as f32),
+            0.018,
+        ));
+    }
+    for (side, sx) in [("left", 1.0), ("right", -1.0)] {
+        let shoulder = if sx > 0.0 { lsh } else { rsh };
+        shapes.push(sphere(
+            &format!("{side}_deltoid"),
+            shoulder,
+            Vec3::new(0.03 * sx, -0.01, 0.0),
+            0.06,
+        ));
+        shapes.push(sphere(
+            &format!("{side}_trapezius"),
+            thorax,
+            Vec3::new(0.07 * sx, 0.2, -0.035),
+            0.05,
+        ));
+        shapes.push(sphere(
+            &format!("{side}_iliac_crest"),
+            pelvis,
+            Vec3::new(0.12 * sx, 0.05, 0.0),
+            0.05,
+        ));
+        shapes.push(sphere(
+            &format!("{side}_lower_abdomen"),
+            pelvis,
+            Vec3::new(0.05 * sx, 0.06, 0.05),
+            0.06,
+        ));
+        shapes.push(sphere(
+            &format!("{side}_serratus"),
+            thorax,
+            Vec3::new(0.12 * sx, 0.02, 0.03),
+            0.05,
+        ));
+        shapes.push(sphere(
+            &format!("{side}_neck_muscle"),
+            neck,
+            Vec3::new(0.03 * sx, 0.04, 0.0),
+            0.04,
+        ));
+        shapes.push(sphere(
+            &format!("{side}_pectoralis_minor"),
+            thorax,
+            Vec3::new(0.1 * sx, 0.13, 0.03),
+            0.045,
+        ));
+    }
+    let s = &skeleton;
+    let (fwd, side, twist) = (
+        dof_at(s, lumbar, 0),
+        dof_at(s, lumbar, 1),
+        dof_at(s, lumbar, 2),
+    );
+    let (tf, ts, tt) = (
+        dof_at(s, thorax, 0),
+        dof_at(s, thorax, 1),
+        dof_at(s, thorax, 2),
+    );
+    let (nf, ny) = (dof_at(s, neck, 0), dof_at(s, neck, 1));
+    let (l, r) = (dof_at(s, lsh, 0), dof_at(s, rsh, 0));
+    let bend_twist = Motion {
+        name: "bend_twist".into(),
+        keys: vec![
+            key(s, 0.0, Vec3::ZERO, &[]),
+            key(s, 0.75, Vec3::ZERO, &[(fwd, 30.0), (tf, 20.0), (nf, 20.0)]),
+            key(
+                s,
+                1.5,
+                Vec3::ZERO,
+                &[(twist, 25.0), (tt, 20.0), (ny, 30.0), (l, 20.0)],
+            ),
+            key(s, 2.25, Vec3::ZERO, &[(side, 18.0), (ts, 12.0), (r, -20.0)]),
+            key(
+                s,
+                3.0,
+                Vec3::ZERO,
+                &[(twist, -25.0), (tt, -20.0), (ny, -30.0), (side, -10.0)],
+            ),
+            key(s, 3.75, Vec3::ZERO, &[]),
+        ],
+        extrapolation: Extrapolation::Loop,
+    };
+    Body {
+        name: "torso",
+        skeleton,
+        shapes,
+        motions: vec![bend_twist],
+        tube: Tube {
+            bottom_joint: pelvis,
+            top_joint: neck,
+            start_m: Vec3::new(0.0, 0.9, 0.0),
+            end_m: Vec3::new(0.0, 1.34, -0.01),
+            zero_dir: Vec3::X,
+            radius: Radius::Wrap { end_radius_m: None },
+            fat_m: |s, angle| 0.008 + 0.008 * (1.0 - s) * (0.5 + 0.5 * angle.sin()),
+        },
+        simulation: SimulationDefaults::default(),
+    }
+}
+
+// ----------------------------------------------------------------------------------------
+// Arm: two 0.30 m bones, capsules of radius 0.05 m, a 0.06 m sphere at the elbow, a skin tube of
+// radius 0.08 m fixed at the shoulder and the wrist; motion "bend": elbow 0° -> 90° -> 0° in 2 s.
+
+fn arm() -> Body {
+    let mut b = SkeletonBuilder::new();
+    let shoulder = b.joint("shoulder", None, Vec3::new(0.0, 1.2, 0.0), &[]);
+    let elbow = b.joint(
+        "elbow",
+        Some(shoulder),
+        Vec3::new(0.3, 0.0, 0.0),
+        &[dof(Vec3::Z, 0.0, 150.0)],
+    );
+    let wrist = b.joint("wrist", Some(elbow), Vec3::new(0.3, 0.0, 0.0), &[]);
+    let skeleton = b.build();
+    let along_x = Quat::from_rotation_z(-FRAC_PI_2);
+    let shapes = vec![
+        sphere("shoulder_cap", shoulder, Vec3::ZERO, 0.05),
+        cylinder(
+            "upper_bone",
+            shoulder,
+            Vec3::new(0.15, 0.0, 0.0),
+            along_x,
+            0.05,
+            0.15,
+        ),
+        sphere("elbow", elbow, Vec3::ZERO, 0.06),
+        cylinder(
+            "lower_bone",
+            elbow,
+            Vec3::new(0.15, 0.0, 0.0),
+            along_x,
+            0.05,
+            0.15,
+        ),
+        sphere("wrist_cap", wrist, Vec3::ZERO, 0.05),
+    ];
+    let e = dof_at(&skeleton, elbow, 0);
+    let bend = Motion {
+        name: "bend".into(),
+        keys: vec![
+            key(&skeleton, 0.0, Vec3::ZERO, &[]),
+            key(&skeleton, 1.0, Vec3::ZERO, &[(e, 90.0)]),
+            key(&skeleton, 2.0, Vec3::ZERO, &[]),
+        ],
+        extrapolation: Extrapolation::Loop,
+    };
+    Body {
+        name: "arm",
+        skeleton,
+        shapes,
+        motions: vec![bend],
+        tube: Tube {
+            bottom_joint: shoulder,
+            top_joint: wrist,
+            start_m: Vec3::new(0.0, 1.2, 0.0),
+            end_m: Vec3::new(0.6, 1.2, 0.0),
+            zero_dir: Vec3::Y,
+            radius: Radius::Constant(0.08),
+            fat_m: |_, _| 0.015,
+        },
+        simulation: SimulationDefaults::default(),
+    }
+}
+
+// ----------------------------------------------------------------------------------------
+// Skin wrapping, materials and attachment.
+
+fn inside_any(instances: &[ShapeInstance], p: Vec3) -> bool {
+    instances
+        .iter()
+        .any(|s| s.may_contain_world(p) && s.value_world(p) < 0.0)
+}
+
+/// Distance from `origin` along `dir` to the outermost muscle surface within `t_max`, if any.
+fn outermost_hit(instances: &[ShapeInstance], origin: Vec3, dir: Vec3, t_max: f32) -> Option<f32> {
+    const STEP: f32 = 0.002;
+    let steps = (t_max / STEP).ceil() as u32;
+    for k in (0..steps).rev() {
+        let t = k as f32 * STEP;
+        if inside_any(instances, origin + dir * t) {
+            let (mut lo, mut hi) = (t, t + STEP);
+            for _ in 0..24 {
+                let mid = 0.5 * (lo + hi);
+                if inside_any(instances, origin + dir * mid) {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            return Some(hi);
+        }
+    }
+    None
+}
+
+fn finish(body: Body, around: u32, along: u32) -> Character {
+    let Body {
+        name,
+        skeleton,
+        shapes,
+        motions,
+        tube,
+        simulation,
+    } = body;
+    let posture = Posture::neutral(&skeleton);
+    let pose = skeleton.forward_kinematics(&posture);
+    let mut character = Character {
+        name: name.to_string(),
+        skeleton,
+        shapes,
+        skin: Skin {
+            around,
+            along,
+            bottom_joint: tube.bottom_joint,
+            top_joint: tube.top_joint,
+            bottom_ring_m: Vec::new(),
+            top_ring_m: Vec::new(),
+            positions_m: Vec::new(),
+            mass_kg: Vec::new(),
+            damping_n_s_per_m: Vec::new(),
+            rest_metric: Vec::new(),
+            stretch: Vec::new(),
+            bending: Vec::new(),
+            fat_m: Vec::new(),
+        },
+        tissue: Vec::new(),
+        simulation,
+        motions,
+    };
+    let mut instances = Vec::new();
+    character.shape_instances_into(&posture, &pose, 0.0, &mut instances);
+
+    // Ring frame: e1 = zero_dir, e2 = e1 × axis, so that ∂r/∂u₂ × ∂r/∂u₁ points outwards.
+    let axis = (tube.end_m - tube.start_m).normalize();
+    let e1 = (tube.zero_dir - axis * tube.zero_dir.dot(axis)).normalize();
+    let e2 = e1.cross(axis);
+    let n_points = (around * along) as usize;
+    let mut radius = vec![0.0f32; n_points];
+    let mut required = vec![0.0f32; n_points];
+    let mut fat = vec![0.0f32; n_points];
+    let dirs: Vec<Vec3> = (0..around)
+        .map(|i| {
+            let phi = TAU * i as f32 / around as f32;
+            e1 * phi.cos() + e2 * phi.sin()
+        })
+        .collect();
+    for j in 0..along {
+        let s = j as f32 / (along - 1) as f32;
+        let centre = tube.start_m.lerp(tube.end_m, s);
+        for i in 0..around {
+            let k = (j * around + i) as usize;
+            let phi = TAU * i as f32 / around as f32;
+            fat[k] = (tube.fat_m)(s, phi);
+            let end_row = j == 0 || j + 1 == along;
+            let (r, need) = match tube.radius {
+                Radius::Constant(r) => (r, r),
+                Radius::Wrap { end_radius_m } => match (end_row, end_radius_m) {
+                    (true, Some(r)) => (r, r),
+                    _ => {
+                        let hit = outermost_hit(&instances, centre, dirs[i as usize], 0.5);
+                        let need = hit.map_or(MIN_RADIUS_M, |t| t + fat[k] + WRAP_MARGIN_M);
+                        (need.max(MIN_RADIUS_M), need.max(MIN_RADIUS_M))
+                    }
+                },
+            };
+            radius[k] = r;
+            required[k] = need;
+        }
+    }
+    // Smooth the wrapped radii a little (never below what keeps the fat layer outside).
+    if matches!(tube.radius, Radius::Wrap { .. }) {
+        for _ in 0..3 {
+            let old = radius.clone();
+            for j in 1..along - 1 {
+                for i in 0..around {
+                    let k = (j * around + i) as usize;
+                    let left = old[(j * around + (i + around - 1) % around) as usize];
+                    let right = old[(j * around + (i + 1) % around) as usize];
+                    let down = old[((j - 1) * around + i) as usize];
+                    let up = old[((j + 1) * around + i) as usize];
+                    let avg = 0.4 * old[k] + 0.15 * (left + right + down + up);
+                    radius[k] = avg.max(required[k]);
+                }
+            }
+        }
+    }
+    let position = |radius: &[f32], k: usize| {
+        let (i, j) = ((k as u32) % around, (k as u32) / around);
+        let s = j as f32 / (along - 1) as f32;
+        tube.start_m.lerp(tube.end_m, s) + dirs[i as usize] * radius[k]
+    };
+    let mut positions: Vec<Vec3> = (0..n_points).map(|k| position(&radius, k)).collect();
+    // Push out any free point whose fat point (r − τ·n̂) is still inside a muscle.
+    let skin_probe = Skin {
+        around,
+        along,
+        ..character.skin.clone()
+    };
+    let mut normals = Vec::new();
+    for _ in 0..20 {
+        skin_probe.outward_normals(&positions, &mut normals);
+        let mut moved = false;
+        for k in 0..n_points {
+            let j = k as u32 / around;
+            if j == 0 || j + 1 == along {
+                continue;
+            }
+            let fat_point = positions[k] - normals[k] * fat[k];
+            if inside_any(&instances, fat_point) {
+                radius[k] += 0.002;
+                positions[k] = position(&radius, k);
+                moved = true;
+            }
+        }
+        if !moved {
+            break;
+        }
+    }
+    let bottom = pose.world_from(tube.bottom_joint).inverse();
+    let top = pose.world_from(tube.top_joint).inverse();
+    let last = (along - 1) * around;
+    let bottom_ring: Vec<Vec3> = (0..around)
+        .map(|i| bottom.transform_point(positions[i as usize]))
+        .collect();
+    let top_ring: Vec<Vec3> = (0..around)
+        .map(|i| top.transform_point(positions[(last + i) as usize]))
+        .collect();
+    // Store the fixed rows exactly as their joints will reproduce them.
+    let world_bottom = pose.world_from(tube.bottom_joint);
+    let world_top = pose.world_from(tube.top_joint);
+    for i in 0..around as usize {
+        positions[i] = world_bottom.transform_point(bottom_ring[i]);
+        positions[last as usize + i] = world_top.transform_point(top_ring[i]);
+    }
+
+    let mats = materials(name);
+    let point_mass = mats.skin_mass_kg / n_points as f32;
+    let mut skin = Skin {
+        around,
+        along,
+        bottom_joint: tube.bottom_joint,
+        top_joint: tube.top_joint,
+        bottom_ring_m: bottom_ring,
+        top_ring_m: top_ring,
+        positions_m: Vec::new(),
+        mass_kg: vec![point_mass; n_points],
+        damping_n_s_per_m: vec![point_mass * mats.damping_per_s; n_points],
+        rest_metric: Vec::new(),
+        stretch: Vec::new(),
+        bending: vec![[mats.bending; 3]; n_points],
+        fat_m: fat,
+    };
+    let metric = skin.metric_of(&positions);
+    let shrink2 = mats.rest_shrink * mats.rest_shrink;
+    skin.rest_metric = metric
+        .iter()
+        .map(|g| [g[0] * shrink2, g[1] * shrink2, g[2] * shrink2])
+        .collect();
+    // η so that one point's stretch stiffness 8·η·G⁰·h_j/h_i gives ω at 32×32.
+    let reference_mass = mats.skin_mass_kg / (32.0 * 32.0);
+    let k_target = reference_mass * mats.stretch_omega_rad_per_s * mats.stretch_omega_rad_per_s;
+    let mean_g11 = skin.rest_metric.iter().map(|g| g[0]).sum::<f32>() / n_points as f32;
+    let mean_g22 = skin.rest_metric.iter().map(|g| g[2]).sum::<f32>() / n_points as f32;
+    let eta11 = k_target / (8.0 * mean_g11 * (1.0 / 31.0) / (1.0 / 32.0));
+    let eta22 = k_target / (8.0 * mean_g22 * (1.0 / 32.0) / (1.0 / 31.0));
+    let eta12 = mats.shear_fraction * 0.5 * (eta11 + eta22);
+    skin.stretch = vec![[eta11, eta12, eta22]; n_points];
+    skin.positions_m = positions;
+    character.skin = skin;
+
+    let k_s = point_mass * mats.tissue_omega_rad_per_s * mats.tissue_omega_rad_per_s;
+    let k_d = 2.0 * mats.tissue_damping_ratio * (k_s * point_mass).sqrt();
+    character.tissue = attach_global(
+        &character,
+        &AttachParams {
+            stiffness_n_per_m: k_s,
+            damping_n_s_per_m: k_d,
+            rest_length_scale: 1.0,
+            max_ray_m: 0.3,
+        },
+    );
+    character
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn count(c: &Character) -> (usize, usize, usize) {
+        let mut n = (0, 0, 0);
+        for s in &c.shapes {
+            match s.primitive {
+                Primitive::Sphere { .. } => n.0 += 1,
+                Primitive::Superellipsoid { .. } => n.1 += 1,
+                Primitive::Cylinder { .. } => n.2 += 1,
+            }
+        }
+        n
+    }
+
+    #[test]
+    fn examples_match_table_1_and_validate() {
+        let want = [
+            ("penguin", (7, 0, 0)),
+            ("wombat", (2, 5, 1)),
+            ("torso", (26, 12, 2)),
+            ("arm", (3, 0, 2)),
+        ];
+        for (name, shapes) in want {
+            let c = build(name, 16, 16).expect("known example");
+            assert_eq!(count(&c), shapes, "{name}");
+            c.validate().expect("valid");
+            assert_eq!(c.skin.point_count(), 256);
+            assert_eq!(c.tissue.len(), 256, "{name}: one spring per point");
+            assert!(!c.motions.is_empty());
+        }
+    }
+}
+
+#[cfg(test)]
+mod file_tests {
+    use super::*;
+
+    #[test]
+    fn committed_assets_equal_the_generator_and_round_trip_exactly() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/characters");
+        for name in NAMES {
+            for (res, suffix) in RESOLUTIONS {
+                let c = build(name, res, res).expect("known example");
+                let text = c.to_toml_string();
+                let path = dir.join(format!("{name}{suffix}.toml"));
+                let committed = std::fs::read_to_string(&path).expect("asset file exists");
+                assert!(
+                    committed == text,
+                    "{} differs from the generator: run `cargo run --example make_characters`",
+                    path.display()
+                );
+                let loaded = Character::load(&path).expect("asset loads");
+                assert_eq!(loaded, c, "{name}{suffix}: load(save(c)) == c");
+            }
+        }
+    }
+
+    #[test]
+    fn skins_start_outside_the_muscles_by_their_fat() {
+        for name in NAMES {
+            let c = build(name, 32, 32).expect("known example");
+            let posture = Posture::neutral(&c.skeleton);
+            let pose = c.skeleton.forward_kinematics(&posture);
+            let mut instances = Vec::new();
+            c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
+            let mut normals = Vec::new();
+            c.skin.outward_normals(&c.skin.positions_m, &mut normals);
+            for (k, p) in c.skin.positions_m.iter().enumerate() {
+                if c.skin.is_fixed(k) {
+                    continue;
+                }
+                let fat_point = *p - normals[k] * c.skin.fat_m[k];
+                for (s, inst) in instances.iter().enumerate() {
+                    assert!(
+                        inst.value_world(fat_point) >= 0.0,
+                        "{name}: point {k} fat point inside shape {s} ({})",
+                        c.shapes[s].name
+                    );
+                }
+            }
+            // Outward normals point away from the body axis on average.
+            let centre =
+                c.skin.positions_m.iter().copied().sum::<Vec3>() / c.skin.point_count() as f32;
+            let outward = c
+                .skin
+                .positions_m
+                .iter()
+                .zip(&normals)
+                .filter(|(p, n)| (**p - centre).dot(**n) > 0.0)
+                .count();
+            assert!(
+                outward * 10 > c.skin.point_count() * 8,
+                "{name}: normals mostly outward"
+            );
+        }
+    }
+
+    #[test]
+    fn every_motion_moves_the_skeleton() {
+        for name in NAMES {
+            let c = build(name, 16, 16).expect("known example");
+            for m in &c.motions {
+                let a = c.skeleton.forward_kinematics(&m.posture_at(0.0));
+                let quarter = m.duration_s() * 0.25;
+                let b = c.skeleton.forward_kinematics(&m.posture_at(quarter));
+                let moved = a
+                    .world_from_joint
+                    .iter()
+                    .zip(&b.world_from_joint)
+                    .map(|(x, y)| {
+                        (x.position_m - y.position_m).length()
+                            + (x.orientation.dot(y.orientation).abs() - 1.0).abs()
+                    })
+                    .fold(0.0, f32::max);
+                assert!(
+                    moved > 1e-3,
+                    "{name}/{}: the skeleton does not move",
+                    m.name
+                );
+            }
+        }
+        // The arm's bend: 0° at 0 s, 90° at 1 s, back at 2 s.
+        let arm = build("arm", 16, 16).expect("arm");
+        let bend = arm.motion("bend").expect("bend");
+        assert!((bend.posture_at(1.0).angles_rad[0] - FRAC_PI_2).abs() < 1e-6);
+        assert!(bend.posture_at(2.0).angles_rad[0].abs() < 1e-6);
+        assert!((bend.posture_at(3.0).angles_rad[0] - FRAC_PI_2).abs() < 1e-5);
+    }
+}

@@ -1,0 +1,412 @@
+//! The character file format: TOML, `format_version = 1` (documented in
+//! `docs/character-format.md`).
+//!
+//! Reading goes through serde and `toml`; writing is done here by hand so that the large
+//! per-point arrays come out one value per line (and a per-point array whose values are all
+//! equal is written as one value). Floats are written in Rust's shortest round-trip form, so
+//! save → load gives back exactly the same [`Character`]. Loading validates everything
+//! ([`Character::validate`]); a bad file gives an error naming the file and the problem.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use super::skeleton::{Joint, JointId};
+use super::{Character, Motion, Shape, ShapeId, SimulationDefaults, Skin, Sym2, TissueSpring};
+
+/// The only file format version this build reads and writes.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Why a character file could not be loaded or saved. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum CharacterFileError {
+    /// The file could not be read.
+    #[error("cannot read character file {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not valid TOML, or a field is missing, unknown or of the wrong type.
+    #[error("character file {path}: {message}")]
+    Syntax {
+        /// The file.
+        path: PathBuf,
+        /// What the parser said (with line and column).
+        message: String,
+    },
+    /// `format_version` is missing or not one this build understands.
+    #[error("character file {path}: {message}")]
+    Version {
+        /// The file.
+        path: PathBuf,
+        /// Which version was found.
+        message: String,
+    },
+    /// The content parses but is not a valid character.
+    #[error("character file {path}: {problem}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: super::ValidationError,
+    },
+    /// Saving failed (the old file, if any, is untouched).
+    #[error(transparent)]
+    Write(#[from] crate::files::WriteError),
+    /// Refused to save an invalid character.
+    #[error("refusing to save character to {path}: {problem}")]
+    SaveInvalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: super::ValidationError,
+    },
+}
+
+/// A per-point (or per-spring) array in the file: one value for all, or one each.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(untagged)]
+enum PerItem<T> {
+    Uniform(T),
+    Each(Vec<T>),
+}
+
+impl<T: Clone> PerItem<T> {
+    fn expand(self, count: usize) -> Vec<T> {
+        match self {
+            PerItem::Uniform(v) => vec![v; count],
+            PerItem::Each(v) => v,
+        }
+    }
+}
+
+#[derive(Deserialize)]
+struct VersionOnly {
+    format_version: Option<toml::Value>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileDoc {
+    #[allow(dead_code)] // checked first, through `VersionOnly`
+    format_version: u32,
+    name: String,
+    simulation: SimulationDefaults,
+    joints: Vec<Joint>,
+    #[serde(default)]
+    shapes: Vec<Shape>,
+    #[serde(default)]
+    motions: Vec<Motion>,
+    skin: SkinDoc,
+    #[serde(default)]
+    tissue: Option<TissueDoc>,
+}
+
+#[derive(Serialize)]
+struct HeadDoc<'a> {
+    format_version: u32,
+    name: &'a str,
+    simulation: &'a SimulationDefaults,
+    joints: &'a [Joint],
+    shapes: &'a [Shape],
+    motions: &'a [Motion],
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SkinDoc {
+    around: u32,
+    along: u32,
+    bottom_joint: JointId,
+    top_joint: JointId,
+    bottom_ring_m: Vec<Vec3>,
+    top_ring_m: Vec<Vec3>,
+    positions_m: Vec<Vec3>,
+    mass_kg: PerItem<f32>,
+    damping_n_s_per_m: PerItem<f32>,
+    rest_metric: PerItem<Sym2>,
+    stretch: PerItem<Sym2>,
+    bending: PerItem<Sym2>,
+    fat_m: PerItem<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TissueDoc {
+    skin_point: Vec<u32>,
+    shape: PerItem<ShapeId>,
+    anchor_rest_m: Vec<Vec3>,
+    stiffness_n_per_m: PerItem<f32>,
+    damping_n_s_per_m: PerItem<f32>,
+    rest_length_m: PerItem<f32>,
+}
+
+impl Character {
+    /// Parses a character from TOML text; `path` is only used in error messages. Validates
+    /// the result.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Character, CharacterFileError> {
+        let syntax = |message: String| CharacterFileError::Syntax {
+            path: path.to_path_buf(),
+            message,
+        };
+        let version: VersionOnly = toml::from_str(text).map_err(|e| syntax(e.to_string()))?;
+        match version.format_version {
+            Some(toml::Value::Integer(v)) if v == i64::from(FORMAT_VERSION) => {}
+            Some(other) => {
+                return Err(CharacterFileError::Version {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "unknown format_version {other} (this build reads format_version = {FORMAT_VERSION})"
+                    ),
+                });
+            }
+            None => {
+                return Err(CharacterFileError::Version {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "format_version is missing (expected format_version = {FORMAT_VERSION})"
+                    ),
+                });
+            }
+        }
+        let doc: FileDoc = toml::from_str(text).map_err(|e| syntax(e.to_string()))?;
+        let points = doc.skin.around as usize * doc.skin.along as usize;
+        let s = doc.skin;
+        let skin = Skin {
+            around: s.around,
+            along: s.along,
+            bottom_joint: s.bottom_joint,
+            top_joint: s.top_joint,
+            bottom_ring_m: s.bottom_ring_m,
+            top_ring_m: s.top_ring_m,
+            positions_m: s.positions_m,
+            mass_kg: s.mass_kg.expand(points),
+            damping_n_s_per_m: s.damping_n_s_per_m.expand(points),
+            rest_metric: s.rest_metric.expand(points),
+            stretch: s.stretch.expand(points),
+            bending: s.bending.expand(points),
+            fat_m: s.fat_m.expand(points),
+        };
+        let tissue = match doc.tissue {
+            None => Vec::new(),
+            Some(t) => {
+                let count = t.skin_point.len();
+                let shape = t.shape.expand(count);
+                let stiffness = t.stiffness_n_per_m.expand(count);
+                let damping = t.damping_n_s_per_m.expand(count);
+                let rest = t.rest_length_m.expand(count);
+                for (what, len) in [
+                    ("shape", shape.len()),
+                    ("anchor_rest_m", t.anchor_rest_m.len()),
+                    ("stiffness_n_per_m", stiffness.len()),
+                    ("damping_n_s_per_m", damping.len()),
+                    ("rest_length_m", rest.len()),
+                ] {
+                    if len != count {
+                        return Err(CharacterFileError::Invalid {
+                            path: path.to_path_buf(),
+                            problem: super::ValidationError(format!(
+                                "tissue: {what} has {len} values but skin_point has {count}"
+                            )),
+                        });
+                    }
+                }
+                (0..count)
+                    .map(|k| TissueSpring {
+                        skin_point: t.skin_point[k],
+                        shape: shape[k],
+                        anchor_rest_m: t.anchor_rest_m[k],
+                        stiffness_n_per_m: stiffness[k],
+                        damping_n_s_per_m: damping[k],
+                        rest_length_m: rest[k],
+                    })
+                    .collect()
+            }
+        };
+        let character = Character {
+            name: doc.name,
+            skeleton: super::Skeleton { joints: doc.joints },
+            shapes: doc.shapes,
+            skin,
+            tissue,
+            simulation: doc.simulation,
+            motions: doc.motions,
+        };
+        character
+            .validate()
+            .map_err(|problem| CharacterFileError::Invalid {
+                path: path.to_path_buf(),
+                problem,
+            })?;
+        Ok(character)
+    }
+
+    /// Loads and validates a character file. On error nothing is returned.
+    pub fn load(path: &Path) -> Result<Character, CharacterFileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| CharacterFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// The character as TOML text (format version [`FORMAT_VERSION`]).
+    pub fn to_toml_string(&self) -> String {
+        let head = HeadDoc {
+            format_version: FORMAT_VERSION,
+            name: &self.name,
+            simulation: &self.simulation,
+            joints: &self.skeleton.joints,
+            shapes: &self.shapes,
+            motions: &self.motions,
+        };
+        let mut out = String::new();
+        out.push_str("# leman character file; see docs/character-format.md\n");
+        // Serialising plain data to TOML cannot fail except for non-finite floats or map
+        // keys, which these types do not have; fall back to an explanatory comment.
+        match toml::to_string(&head) {
+            Ok(text) => out.push_str(&text),
+            Err(e) => {
+                let _ = writeln!(out, "# could not serialise the head: {e}");
+            }
+        }
+        let s = &self.skin;
+        out.push_str("\n[skin]\n");
+        let _ = writeln!(out, "around = {}", s.around);
+        let _ = writeln!(out, "along = {}", s.along);
+        let _ = writeln!(out, "bottom_joint = {}", s.bottom_joint.0);
+        let _ = writeln!(out, "top_joint = {}", s.top_joint.0);
+        write_vec3s(&mut out, "bottom_ring_m", &s.bottom_ring_m);
+        write_vec3s(&mut out, "top_ring_m", &s.top_ring_m);
+        write_vec3s(&mut out, "positions_m", &s.positions_m);
+        write_scalars(&mut out, "mass_kg", &s.mass_kg);
+        write_scalars(&mut out, "damping_n_s_per_m", &s.damping_n_s_per_m);
+        write_sym2s(&mut out, "rest_metric", &s.rest_metric);
+        write_sym2s(&mut out, "stretch", &s.stretch);
+        write_sym2s(&mut out, "bending", &s.bending);
+        write_scalars(&mut out, "fat_m", &s.fat_m);
+        if !self.tissue.is_empty() {
+            out.push_str("\n[tissue]\n");
+            let points: Vec<u32> = self.tissue.iter().map(|t| t.skin_point).collect();
+            write_ints(&mut out, "skin_point", &points);
+            let shapes: Vec<u32> = self.tissue.iter().map(|t| t.shape.0).collect();
+            if shapes.windows(2).all(|w| w[0] == w[1]) {
+                let _ = writeln!(out, "shape = {}", shapes[0]);
+            } else {
+                write_ints(&mut out, "shape", &shapes);
+            }
+            let anchors: Vec<Vec3> = self.tissue.iter().map(|t| t.anchor_rest_m).collect();
+            write_vec3s(&mut out, "anchor_rest_m", &anchors);
+            let f = |g: fn(&TissueSpring) -> f32| self.tissue.iter().map(g).collect::<Vec<f32>>();
+            write_scalars(&mut out, "stiffness_n_per_m", &f(|t| t.stiffness_n_per_m));
+            write_scalars(&mut out, "damping_n_s_per_m", &f(|t| t.damping_n_s_per_m));
+            write_scalars(&mut out, "rest_length_m", &f(|t| t.rest_length_m));
+        }
+        out
+    }
+
+    /// Validates and saves atomically ([`crate::files::write_atomic`]): a crash never leaves a
+    /// half-written file, and an invalid character is not written at all.
+    pub fn save(&self, path: &Path) -> Result<(), CharacterFileError> {
+        self.validate()
+            .map_err(|problem| CharacterFileError::SaveInvalid {
+                path: path.to_path_buf(),
+                problem,
+            })?;
+        crate::files::write_atomic(path, self.to_toml_string().as_bytes())?;
+        Ok(())
+    }
+}
+
+/// A float in TOML: Rust's shortest round-trip form, which TOML reads back exactly.
+fn float(out: &mut String, v: f32) {
+    if v.is_nan() {
+        out.push_str("nan");
+    } else if v.is_infinite() {
+        out.push_str(if v > 0.0 { "inf" } else { "-inf" });
+    } else {
+        let _ = write!(out, "{v:?}");
+    }
+}
+
+fn write_vec3s(out: &mut String, key: &str, values: &[Vec3]) {
+    let _ = writeln!(out, "{key} = [");
+    for v in values {
+        out.push_str("  [");
+        float(out, v.x);
+        out.push_str(", ");
+        float(out, v.y);
+        out.push_str(", ");
+        float(out, v.z);
+        out.push_str("],\n");
+    }
+    out.push_str("]\n");
+}
+
+fn write_sym2s(out: &mut String, key: &str, values: &[Sym2]) {
+    let one = |out: &mut String, t: &Sym2| {
+        out.push('[');
+        float(out, t[0]);
+        out.push_str(", ");
+        float(out, t[1]);
+        out.push_str(", ");
+        float(out, t[2]);
+        out.push(']');
+    };
+    if let Some(first) = values.first()
+        && values
+            .iter()
+            .all(|v| v.iter().zip(first).all(|(a, b)| a.to_bits() == b.to_bits()))
+    {
+        let _ = write!(out, "{key} = ");
+        one(out, first);
+        out.push('\n');
+        return;
+    }
+    let _ = writeln!(out, "{key} = [");
+    for v in values {
+        out.push_str("  ");
+        one(out, v);
+        out.push_str(",\n");
+    }
+    out.push_str("]\n");
+}
+
+fn write_scalars(out: &mut String, key: &str, values: &[f32]) {
+    if let Some(first) = values.first()
+        && values.iter().all(|v| v.to_bits() == first.to_bits())
+    {
+        let _ = write!(out, "{key} = ");
+        float(out, *first);
+        out.push('\n');
+        return;
+    }
+    let _ = writeln!(out, "{key} = [");
+    for chunk in values.chunks(8) {
+        out.push_str(" ");
+        for v in chunk {
+            out.push(' ');
+            float(out, *v);
+            out.push(',');
+        }
+        out.push('\n');
+    }
+    out.push_str("]\n");
+}
+
+fn write_ints(out: &mut String, key: &str, values: &[u32]) {
+    let _ = writeln!(out, "{key} = [");
+    for chunk in values.chunks(16) {
+        out.push_str(" ");
+        for v in chunk {
+            let _ = write!(out, " {v},");
+        }
+        out.push('\n');
+    }
+    out.push_str("]\n");
+}

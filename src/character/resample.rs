@@ -1,0 +1,223 @@
+//! Changing the skin resolution (paper section 6.5): every per-point value is bilinearly
+//! interpolated in material coordinates (periodic around, clamped along).
+//!
+//! Intensive values (positions, rest metric, elasticity, bending, fat, spring rest lengths) are
+//! interpolated as they are. Extensive values (point mass, point damping, spring k_s and k_d)
+//! are interpolated and then scaled by `M·N / (M'·N')`, so the total mass and the accelerations
+//! they cause stay the same at any resolution. A new point that coincides with an old grid point
+//! keeps that point's spring unchanged (apart from that scaling); other points are attached
+//! anew ([`super::tissue::anchor_for_point`]) with interpolated spring parameters, and get a
+//! spring only where the interpolated "has a spring" weight is at least one half.
+
+use glam::Vec3;
+
+use super::skin::{Skin, Sym2};
+use super::tissue::{TissueSpring, anchor_for_point};
+use super::{Character, Posture, ValidationError};
+
+/// Where a new grid coordinate falls on the old grid: lower index, upper index, weight of upper.
+#[derive(Debug, Clone, Copy)]
+struct Lerp {
+    lo: u32,
+    hi: u32,
+    w: f32,
+    exact: Option<u32>,
+}
+
+fn around_lerp(i_new: u32, m_new: u32, m_old: u32) -> Lerp {
+    // u = i_new / m_new; old coordinate x = u · m_old, computed exactly in integers.
+    let num = u64::from(i_new) * u64::from(m_old);
+    let lo = (num / u64::from(m_new)) as u32;
+    let rem = (num % u64::from(m_new)) as u32;
+    Lerp {
+        lo: lo % m_old,
+        hi: (lo + 1) % m_old,
+        w: rem as f32 / m_new as f32,
+        exact: (rem == 0).then_some(lo % m_old),
+    }
+}
+
+fn along_lerp(j_new: u32, n_new: u32, n_old: u32) -> Lerp {
+    let num = u64::from(j_new) * u64::from(n_old - 1);
+    let den = u64::from(n_new - 1);
+    let lo = (num / den) as u32;
+    let rem = (num % den) as u32;
+    Lerp {
+        lo,
+        hi: (lo + 1).min(n_old - 1),
+        w: rem as f32 / den as f32,
+        exact: (rem == 0).then_some(lo),
+    }
+}
+
+trait Mix: Copy {
+    fn mix(a: Self, b: Self, w: f32) -> Self;
+}
+
+impl Mix for f32 {
+    fn mix(a: Self, b: Self, w: f32) -> Self {
+        if w == 0.0 { a } else { a + (b - a) * w }
+    }
+}
+
+impl Mix for Vec3 {
+    fn mix(a: Self, b: Self, w: f32) -> Self {
+        if w == 0.0 { a } else { a + (b - a) * w }
+    }
+}
+
+impl Mix for Sym2 {
+    fn mix(a: Self, b: Self, w: f32) -> Self {
+        [
+            f32::mix(a[0], b[0], w),
+            f32::mix(a[1], b[1], w),
+            f32::mix(a[2], b[2], w),
+        ]
+    }
+}
+
+impl Character {
+    /// This character with its skin resampled to `around × along` points (see the module
+    /// docs). The skeleton, shapes, motions and defaults are unchanged.
+    pub fn with_resolution(&self, around: u32, along: u32) -> Result<Character, ValidationError> {
+        if around < 3 || along < 3 {
+            return Err(ValidationError(format!(
+                "resolution must be at least 3×3, got {around}×{along}"
+            )));
+        }
+        if around > 4096 || along > 4096 {
+            return Err(ValidationError(format!(
+                "resolution {around}×{along} is larger than 4096×4096"
+            )));
+        }
+        let old = &self.skin;
+        let (m0, n0) = (old.around, old.along);
+        let scale = (m0 as f32 * n0 as f32) / (around as f32 * along as f32);
+        let li: Vec<Lerp> = (0..around).map(|i| around_lerp(i, around, m0)).collect();
+        let lj: Vec<Lerp> = (0..along).map(|j| along_lerp(j, along, n0)).collect();
+
+        fn grid<T: Mix>(old: &Skin, values: &[T], li: &[Lerp], lj: &[Lerp]) -> Vec<T> {
+            let mut out = Vec::with_capacity(li.len() * lj.len());
+            for b in lj {
+                for a in li {
+                    let v = |i: u32, j: u32| values[old.index(i, j)];
+                    let lo = T::mix(v(a.lo, b.lo), v(a.hi, b.lo), a.w);
+                    let hi = T::mix(v(a.lo, b.hi), v(a.hi, b.hi), a.w);
+                    out.push(T::mix(lo, hi, b.w));
+                }
+            }
+            out
+        }
+        let ring = |values: &[Vec3]| -> Vec<Vec3> {
+            li.iter()
+                .map(|a| Vec3::mix(values[a.lo as usize], values[a.hi as usize], a.w))
+                .collect()
+        };
+
+        let mut skin = Skin {
+            around,
+            along,
+            bottom_joint: old.bottom_joint,
+            top_joint: old.top_joint,
+            bottom_ring_m: ring(&old.bottom_ring_m),
+            top_ring_m: ring(&old.top_ring_m),
+            positions_m: grid(old, &old.positions_m, &li, &lj),
+            mass_kg: grid(old, &old.mass_kg, &li, &lj)
+                .into_iter()
+                .map(|m| m * scale)
+                .collect(),
+            damping_n_s_per_m: grid(old, &old.damping_n_s_per_m, &li, &lj)
+                .into_iter()
+                .map(|d| d * scale)
+                .collect(),
+            rest_metric: grid(old, &old.rest_metric, &li, &lj),
+            stretch: grid(old, &old.stretch, &li, &lj),
+            bending: grid(old, &old.bending, &li, &lj),
+            fat_m: grid(old, &old.fat_m, &li, &lj),
+        };
+        // Fixed rows exactly where their joints put them.
+        let pose = self
+            .skeleton
+            .forward_kinematics(&Posture::neutral(&self.skeleton));
+        let bottom = pose.world_from(skin.bottom_joint);
+        let top = pose.world_from(skin.top_joint);
+        for i in 0..around {
+            let b = skin.index(i, 0);
+            skin.positions_m[b] = bottom.transform_point(skin.bottom_ring_m[i as usize]);
+            let t = skin.index(i, along - 1);
+            skin.positions_m[t] = top.transform_point(skin.top_ring_m[i as usize]);
+        }
+
+        // Springs: per-point fields from the old springs (first spring of each point).
+        let count = old.point_count();
+        let mut first: Vec<Option<&TissueSpring>> = vec![None; count];
+        for s in &self.tissue {
+            let slot = &mut first[s.skin_point as usize % count.max(1)];
+            if slot.is_none() {
+                *slot = Some(s);
+            }
+        }
+        let field = |g: fn(&TissueSpring) -> f32| -> Vec<f32> {
+            first.iter().map(|s| s.map(g).unwrap_or(0.0)).collect()
+        };
+        let has = grid(old, &field(|_| 1.0), &li, &lj);
+        let ks = grid(old, &field(|s| s.stiffness_n_per_m), &li, &lj);
+        let kd = grid(old, &field(|s| s.damping_n_s_per_m), &li, &lj);
+        let rest = grid(old, &field(|s| s.rest_length_m), &li, &lj);
+
+        let mut resampled = Character {
+            name: self.name.clone(),
+            skeleton: self.skeleton.clone(),
+            shapes: self.shapes.clone(),
+            skin,
+            tissue: Vec::new(),
+            simulation: self.simulation,
+            motions: self.motions.clone(),
+        };
+        let mut instances = Vec::new();
+        resampled.shape_instances_into(
+            &Posture::neutral(&self.skeleton),
+            &pose,
+            0.0,
+            &mut instances,
+        );
+        let mut normals = Vec::new();
+        resampled
+            .skin
+            .outward_normals(&resampled.skin.positions_m, &mut normals);
+        let mut tissue = Vec::new();
+        for (jn, b) in lj.iter().enumerate() {
+            for (im, a) in li.iter().enumerate() {
+                let k = resampled.skin.index(im as u32, jn as u32);
+                if let (Some(i0), Some(j0)) = (a.exact, b.exact) {
+                    if let Some(s) = first[old.index(i0, j0)] {
+                        tissue.push(TissueSpring {
+                            skin_point: k as u32,
+                            stiffness_n_per_m: s.stiffness_n_per_m * scale,
+                            damping_n_s_per_m: s.damping_n_s_per_m * scale,
+                            ..*s
+                        });
+                    }
+                    continue;
+                }
+                if has[k] < 0.5 {
+                    continue;
+                }
+                let p = resampled.skin.positions_m[k];
+                if let Some((shape, anchor, _)) = anchor_for_point(&instances, p, normals[k], 0.3) {
+                    tissue.push(TissueSpring {
+                        skin_point: k as u32,
+                        shape,
+                        anchor_rest_m: anchor,
+                        stiffness_n_per_m: ks[k] / has[k] * scale,
+                        damping_n_s_per_m: kd[k] / has[k] * scale,
+                        rest_length_m: rest[k] / has[k],
+                    });
+                }
+            }
+        }
+        resampled.tissue = tissue;
+        resampled.validate()?;
+        Ok(resampled)
+    }
+}
