@@ -1,10 +1,323 @@
-//! `leman simulate`.
+//! `leman simulate`: runs a character's elastic surface simulation headless and prints a
+//! Table-1 style report (LEMAN paper, section 7), or one JSON object with `--json`
+//! (shape documented in docs/simulate.md).
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use serde::Serialize;
+
+use leman::character::{Character, Primitive};
+use leman::clock::{Clock, RealClock};
+use leman::sim::surface::SurfaceModel;
+use leman::sim::{
+    AdvanceReport, DeformationModel, FixedPosture, IntegratorKind, MotionPoses, PoseSource,
+    Unlimited,
+};
 
 /// Arguments of `leman simulate`.
 #[derive(Debug, Default, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Character file (TOML), or an example name (`penguin`, `wombat`, `torso`, `arm`, or
+    /// `torso_16` for the 16×16 version) looked up in assets/characters/.
+    pub character: String,
+    /// Motion to play (default: the character's first motion; none: the neutral posture).
+    #[arg(long)]
+    pub motion: Option<String>,
+    /// Simulated seconds (default: one pass of the motion, at least 2 s).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Integrator: euler, verlet, rk2 or rk4.
+    #[arg(long, default_value = "verlet")]
+    pub integrator: String,
+    /// Skin resolution `MxN` (around × along), resampled from the file's skin.
+    #[arg(long)]
+    pub resolution: Option<String>,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Smallest and largest accepted step, seconds.
+#[derive(Debug, Serialize)]
+struct StepSecs {
+    min: f64,
+    max: f64,
+}
+
+/// Fractions of the simulation's wall time.
+#[derive(Debug, Serialize)]
+struct PhaseFraction {
+    force: f64,
+    constraints: f64,
+    other: f64,
+}
+
+/// The `--json` object (see docs/simulate.md).
+#[derive(Debug, Serialize)]
+struct Report {
+    character: String,
+    file: Option<String>,
+    motion: Option<String>,
+    integrator: &'static str,
+    resolution: [u32; 2],
+    skin_points: usize,
+    muscles: MuscleCounts,
+    sim_seconds: f64,
+    wall_seconds: f64,
+    slowdown: f64,
+    steps: u64,
+    rejected_steps: u64,
+    constraint_rejections: u64,
+    forced_steps: u64,
+    step_secs: StepSecs,
+    force_evals: u64,
+    velocity_evals: u64,
+    phase_fraction: PhaseFraction,
+    max_penetration_m: f32,
+    final_max_depth_m: f32,
+    nonfinite_events: u64,
+    point_steps_per_second: f64,
+}
+
+#[derive(Debug, Serialize, Default)]
+struct MuscleCounts {
+    spheres: usize,
+    superellipsoids: usize,
+    cylinders: usize,
+}
+
+fn resolve_character(arg: &str) -> anyhow::Result<(Character, Option<PathBuf>)> {
+    let as_path = Path::new(arg);
+    let candidates = [
+        as_path.to_path_buf(),
+        Path::new("assets/characters").join(format!("{arg}.toml")),
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("assets/characters")
+            .join(format!("{arg}.toml")),
+    ];
+    for path in &candidates {
+        if path.is_file() {
+            let c = Character::load(path)?;
+            return Ok((c, Some(path.clone())));
+        }
+    }
+    // An example name without its file: build it in memory.
+    let (name, res) = match arg.strip_suffix("_16") {
+        Some(base) => (base, 16),
+        None => (arg, 32),
+    };
+    if let Some(c) = leman::character::examples::build(name, res, res) {
+        return Ok((c, None));
+    }
+    bail!(
+        "character {arg:?}: no such file, and not an example name ({})",
+        leman::character::examples::NAMES.join(", ")
+    )
+}
+
+fn parse_resolution(text: &str) -> anyhow::Result<(u32, u32)> {
+    let (m, n) = text
+        .split_once(['x', 'X', '×'])
+        .with_context(|| format!("--resolution {text:?}: expected MxN, e.g. 32x32"))?;
+    let m: u32 = m
+        .trim()
+        .parse()
+        .with_context(|| format!("--resolution {text:?}: M is not a number"))?;
+    let n: u32 = n
+        .trim()
+        .parse()
+        .with_context(|| format!("--resolution {text:?}: N is not a number"))?;
+    Ok((m, n))
+}
 
 /// Runs `leman simulate`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("leman simulate is not built yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let kind = IntegratorKind::from_name(&args.integrator).with_context(|| {
+        format!(
+            "--integrator {:?}: expected one of euler, verlet, rk2, rk4",
+            args.integrator
+        )
+    })?;
+    let (mut character, file) = resolve_character(&args.character)?;
+    if let Some(text) = &args.resolution {
+        let (m, n) = parse_resolution(text)?;
+        character = character
+            .with_resolution(m, n)
+            .with_context(|| format!("--resolution {text}"))?;
+    }
+    let motion = match &args.motion {
+        Some(name) => Some(
+            character
+                .motion(name)
+                .with_context(|| {
+                    let names: Vec<_> = character.motions.iter().map(|m| m.name.as_str()).collect();
+                    format!(
+                        "character {:?} has no motion {name:?} (it has: {})",
+                        character.name,
+                        names.join(", ")
+                    )
+                })?
+                .clone(),
+        ),
+        None => character.motions.first().cloned(),
+    };
+    let seconds = match args.seconds {
+        Some(s) if s.is_finite() && s > 0.0 => s,
+        Some(s) => bail!("--seconds {s}: must be a positive number"),
+        None => motion
+            .as_ref()
+            .map(|m| f64::from(m.duration_s()).max(2.0))
+            .unwrap_or(2.0),
+    };
+    let mut muscles = MuscleCounts::default();
+    for s in &character.shapes {
+        match s.primitive {
+            Primitive::Sphere { .. } => muscles.spheres += 1,
+            Primitive::Superellipsoid { .. } => muscles.superellipsoids += 1,
+            Primitive::Cylinder { .. } => muscles.cylinders += 1,
+        }
+    }
+    let name = character.name.clone();
+    let neutral = leman::character::Posture::neutral(&character.skeleton);
+    let mut model = SurfaceModel::new(character, kind)?;
+    let (m, n) = model.resolution();
+
+    let clock = RealClock::new();
+    let mut fixed = FixedPosture(neutral);
+    let mut motion_poses = motion.as_ref().map(MotionPoses);
+    let poses: &mut dyn PoseSource = match motion_poses.as_mut() {
+        Some(p) => p,
+        None => &mut fixed,
+    };
+    let mut total = AdvanceReport::default();
+    let start = clock.now();
+    // Advance in 1/30 s slices, as the app's frames would.
+    let slice = 1.0 / 30.0;
+    let mut target = 0.0f64;
+    while target < seconds {
+        target = (target + slice).min(seconds);
+        let r = model.advance(target, poses, &mut Unlimited, Some(&clock));
+        total.merge(&r);
+        if !r.reached_target {
+            break;
+        }
+    }
+    let wall = clock.now().saturating_sub(start);
+    let wall_s = wall.as_secs_f64().max(1e-9);
+    let sim_s = model.time_s();
+    let (force, constraints, other) = total.phases.fractions();
+    let report = Report {
+        character: name,
+        file: file.map(|p| p.display().to_string()),
+        motion: motion.map(|m| m.name),
+        integrator: kind.name(),
+        resolution: [m, n],
+        skin_points: model.point_count(),
+        muscles,
+        sim_seconds: sim_s,
+        wall_seconds: wall_s,
+        slowdown: if sim_s > 0.0 {
+            wall_s / sim_s
+        } else {
+            f64::INFINITY
+        },
+        steps: total.steps,
+        rejected_steps: total.rejected_steps,
+        constraint_rejections: total.constraint_rejections,
+        forced_steps: total.forced_steps,
+        step_secs: StepSecs {
+            min: if total.steps > 0 {
+                total.min_step_s
+            } else {
+                0.0
+            },
+            max: total.max_step_s,
+        },
+        force_evals: total.force_evals,
+        velocity_evals: total.velocity_evals,
+        phase_fraction: PhaseFraction {
+            force,
+            constraints,
+            other,
+        },
+        max_penetration_m: total.max_penetration_m,
+        final_max_depth_m: model.max_depth_m(),
+        nonfinite_events: total.nonfinite_events,
+        point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table(&report, wall);
+    }
+    Ok(())
+}
+
+fn print_table(r: &Report, wall: Duration) {
+    let ms = |s: f64| s * 1000.0;
+    println!("{:<28}{}", "Character", r.character);
+    println!(
+        "{:<28}{} mass points ({}×{})",
+        "Skin mesh", r.skin_points, r.resolution[0], r.resolution[1]
+    );
+    println!(
+        "{:<28}{} spheres, {} superellipsoids, {} cylinders",
+        "Muscle layer", r.muscles.spheres, r.muscles.superellipsoids, r.muscles.cylinders
+    );
+    println!(
+        "{:<28}{}",
+        "Motion",
+        r.motion.as_deref().unwrap_or("(neutral posture)")
+    );
+    println!("{:<28}{}", "Solver", r.integrator);
+    println!(
+        "{:<28}[{:.2}–{:.2}]",
+        "Timestep interval (ms)",
+        ms(r.step_secs.min),
+        ms(r.step_secs.max)
+    );
+    let speed = if r.slowdown >= 1.0 {
+        format!("{:.2}× (slower than real time)", r.slowdown)
+    } else {
+        format!(
+            "{:.4}× ({:.1}× faster than real time)",
+            r.slowdown,
+            1.0 / r.slowdown
+        )
+    };
+    println!("{:<28}{speed}", "Simulation slowdown");
+    println!(
+        "{:<28}{:.1}",
+        "% Force evaluation",
+        100.0 * r.phase_fraction.force
+    );
+    println!(
+        "{:<28}{:.1}",
+        "% Constraints",
+        100.0 * r.phase_fraction.constraints
+    );
+    println!("{:<28}{:.1}", "% Other", 100.0 * r.phase_fraction.other);
+    println!(
+        "{:<28}{} accepted, {} rejected ({} by constraints), {} forced",
+        "Steps", r.steps, r.rejected_steps, r.constraint_rejections, r.forced_steps
+    );
+    println!(
+        "{:<28}{:.3e}",
+        "Point-steps per second", r.point_steps_per_second
+    );
+    println!(
+        "{:<28}{:.2} mm (final state {:.3} mm)",
+        "Max penetration",
+        r.max_penetration_m * 1000.0,
+        r.final_max_depth_m * 1000.0
+    );
+    println!("{:<28}{}", "Non-finite events", r.nonfinite_events);
+    println!(
+        "{:<28}{:.3} s simulated in {:.3} s",
+        "Time",
+        r.sim_seconds,
+        wall.as_secs_f64()
+    );
 }

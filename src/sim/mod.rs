@@ -1,4 +1,374 @@
 //! Simulation: the deformation models behind one interface, and the integrators they share.
+//!
+//! # The seam ([`DeformationModel`])
+//! Both deformation models (the LEMAN elastic surface layer model in [`surface`], and later the
+//! control lattice) implement [`DeformationModel`]. The app, the baker, `leman simulate` and the
+//! tools only ever talk to this trait:
+//! - drive: [`DeformationModel::advance`] to a target simulation time, given a [`PoseSource`]
+//!   (the skeleton posture at any simulation time: a motion, IK or a tool edit) and a
+//!   [`StepBudget`] asked before every step attempt ("may I take another step?") so the frame
+//!   scheduler keeps control of wall-clock time. It returns an [`AdvanceReport`].
+//! - read: [`DeformationModel::surface_mesh_into`] fills a [`SurfaceMesh`] (positions, normals,
+//!   triangle indices; always finite).
+//! - edit: [`DeformationModel::apply`] takes a [`ParameterChange`] between steps.
+//! - save: [`DeformationModel::snapshot`] / [`DeformationModel::restore`] (blow-up guard, undo,
+//!   baking), [`DeformationModel::set_resolution`].
+//!
+//! # Timing
+//! The models are pure: they never read a clock themselves. Per-phase timing is optional
+//! instrumentation: pass `Some(clock)` (any [`Clock`]: real in `leman simulate` and the app, a
+//! [`crate::clock::VirtualClock`] in tests) and the report's [`PhaseTimes`] are filled from it;
+//! pass `None` and they stay zero (and no clock is read at all).
 
 pub mod ode;
 pub mod surface;
+
+use std::any::Any;
+use std::sync::Arc;
+use std::time::Duration;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::character::{Posture, Sym2};
+use crate::clock::Clock;
+pub use ode::{IntegratorKind, Tolerances};
+
+/// The skeleton posture at any simulation time: the only input that drives a deformation model.
+pub trait PoseSource {
+    /// Writes the posture at simulation time `time_s` into `out` (reuse its storage).
+    fn posture_at(&mut self, time_s: f64, out: &mut Posture);
+}
+
+/// A [`PoseSource`] that plays a keyed motion.
+#[derive(Debug, Clone, Copy)]
+pub struct MotionPoses<'a>(pub &'a crate::character::Motion);
+
+impl PoseSource for MotionPoses<'_> {
+    fn posture_at(&mut self, time_s: f64, out: &mut Posture) {
+        self.0.posture_at_into(time_s as f32, out);
+    }
+}
+
+/// A [`PoseSource`] that holds one posture (e.g. the current edit or IK result).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FixedPosture(pub Posture);
+
+impl PoseSource for FixedPosture {
+    fn posture_at(&mut self, _time_s: f64, out: &mut Posture) {
+        out.clone_from(&self.0);
+    }
+}
+
+impl<F: FnMut(f64, &mut Posture)> PoseSource for F {
+    fn posture_at(&mut self, time_s: f64, out: &mut Posture) {
+        self(time_s, out);
+    }
+}
+
+/// Asked before every step attempt (accepted or not): may the model take another one? The
+/// frame scheduler answers from its clock; `leman simulate` and the baker use [`Unlimited`].
+pub trait StepBudget {
+    /// True to allow one more step attempt.
+    fn may_step(&mut self) -> bool;
+}
+
+impl<F: FnMut() -> bool> StepBudget for F {
+    fn may_step(&mut self) -> bool {
+        self()
+    }
+}
+
+/// A budget that always allows another step.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Unlimited;
+
+impl StepBudget for Unlimited {
+    fn may_step(&mut self) -> bool {
+        true
+    }
+}
+
+/// A budget of at most `n` step attempts.
+#[derive(Debug, Clone, Copy)]
+pub struct MaxAttempts(pub u64);
+
+impl StepBudget for MaxAttempts {
+    fn may_step(&mut self) -> bool {
+        if self.0 == 0 {
+            false
+        } else {
+            self.0 -= 1;
+            true
+        }
+    }
+}
+
+/// Wall-clock time spent per phase (zero when no clock was passed).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct PhaseTimes {
+    /// Force evaluation (elastic, tissue, gravity, damping).
+    pub force: Duration,
+    /// Non-penetration constraints (inside/outside tests, projections, velocity correction).
+    pub constraints: Duration,
+    /// Everything else (integrator arithmetic, skeleton poses, guards, bookkeeping).
+    pub other: Duration,
+}
+
+impl PhaseTimes {
+    /// Sum of the three phases.
+    pub fn total(&self) -> Duration {
+        self.force + self.constraints + self.other
+    }
+
+    /// Fractions `(force, constraints, other)` of the total (zeros when nothing was timed).
+    pub fn fractions(&self) -> (f64, f64, f64) {
+        let t = self.total().as_secs_f64();
+        if t > 0.0 {
+            (
+                self.force.as_secs_f64() / t,
+                self.constraints.as_secs_f64() / t,
+                self.other.as_secs_f64() / t,
+            )
+        } else {
+            (0.0, 0.0, 0.0)
+        }
+    }
+}
+
+/// What one or more [`DeformationModel::advance`] calls did.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AdvanceReport {
+    /// Simulation time reached, seconds.
+    pub time_s: f64,
+    /// Whether the target time was reached (false: the budget ran out first).
+    pub reached_target: bool,
+    /// Accepted steps.
+    pub steps: u64,
+    /// Rejected attempts for any reason (error control, constraints, guard).
+    pub rejected_steps: u64,
+    /// Of those, rejected because a constraint correction exceeded ε_c.
+    pub constraint_rejections: u64,
+    /// Accepted steps taken at the minimum step despite their error or constraint correction.
+    pub forced_steps: u64,
+    /// Smallest accepted step, seconds (`f64::INFINITY` when no step was accepted).
+    pub min_step_s: f64,
+    /// Largest accepted step, seconds (0 when no step was accepted).
+    pub max_step_s: f64,
+    /// Force evaluations with positions (each also evaluates velocity forces).
+    pub force_evals: u64,
+    /// Extra velocity-only force evaluations (Verlet's fixed-point iterations).
+    pub velocity_evals: u64,
+    /// Largest constraint correction applied on an accepted step, metres (how deep a point of
+    /// the fat layer had got inside a muscle before it was pushed out).
+    pub max_penetration_m: f32,
+    /// Non-finite states or energy explosions caught (the step was rejected and, if the state
+    /// itself was bad, the last good state restored).
+    pub nonfinite_events: u64,
+    /// Per-phase wall-clock time (zero unless a clock was passed).
+    pub phases: PhaseTimes,
+}
+
+impl Default for AdvanceReport {
+    fn default() -> Self {
+        Self {
+            time_s: 0.0,
+            reached_target: false,
+            steps: 0,
+            rejected_steps: 0,
+            constraint_rejections: 0,
+            forced_steps: 0,
+            min_step_s: f64::INFINITY,
+            max_step_s: 0.0,
+            force_evals: 0,
+            velocity_evals: 0,
+            max_penetration_m: 0.0,
+            nonfinite_events: 0,
+            phases: PhaseTimes::default(),
+        }
+    }
+}
+
+impl AdvanceReport {
+    /// Adds a later report into this one (counts summed, extremes combined, time and
+    /// `reached_target` taken from `later`).
+    pub fn merge(&mut self, later: &AdvanceReport) {
+        self.time_s = later.time_s;
+        self.reached_target = later.reached_target;
+        self.steps += later.steps;
+        self.rejected_steps += later.rejected_steps;
+        self.constraint_rejections += later.constraint_rejections;
+        self.forced_steps += later.forced_steps;
+        self.min_step_s = self.min_step_s.min(later.min_step_s);
+        self.max_step_s = self.max_step_s.max(later.max_step_s);
+        self.force_evals += later.force_evals;
+        self.velocity_evals += later.velocity_evals;
+        self.max_penetration_m = self.max_penetration_m.max(later.max_penetration_m);
+        self.nonfinite_events += later.nonfinite_events;
+        self.phases.force += later.phases.force;
+        self.phases.constraints += later.phases.constraints;
+        self.phases.other += later.phases.other;
+    }
+}
+
+/// The deformed surface as a triangle mesh, ready to draw. Every number is finite.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SurfaceMesh {
+    /// Vertex positions in the world, metres.
+    pub positions_m: Vec<Vec3>,
+    /// Unit outward vertex normals.
+    pub normals: Vec<Vec3>,
+    /// Triangles, three vertex indices each, counter-clockwise seen from outside.
+    pub indices: Vec<u32>,
+}
+
+/// Which skin points (or tissue springs) a [`ParameterChange`] touches.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Selection {
+    /// Every point (or spring).
+    All,
+    /// These indices (skin point index `j·M + i`, or spring index).
+    Some(Vec<u32>),
+}
+
+/// A parameter change applied between steps. Per-point values follow the character model's
+/// units (see [`crate::character::Skin`]); they are validated and a bad value changes nothing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ParameterChange {
+    /// Stretch/shear elasticity η `[η₁₁, η₁₂, η₂₂]`, N/m³.
+    Stretch(Selection, Sym2),
+    /// Bending resistance ξ `[ξ₁₁, ξ₁₂, ξ₂₂]`, N/m.
+    Bending(Selection, Sym2),
+    /// Multiplies the rest metric G⁰ (the skin's preferred size; 1.1 = 10 % looser per axis²).
+    RestMetricScale(Selection, f32),
+    /// Point mass, kg.
+    Mass(Selection, f32),
+    /// Point damping γ, N·s/m.
+    Damping(Selection, f32),
+    /// Fat thickness τ, metres.
+    Fat(Selection, f32),
+    /// Tissue spring stiffness k_s, N/m.
+    TissueStiffness(Selection, f32),
+    /// Tissue spring damping k_d, N·s/m.
+    TissueDamping(Selection, f32),
+    /// Gravity, m/s².
+    Gravity(Vec3),
+    /// k∥ and k⊥ of eq. 13d.
+    Contact {
+        /// Fraction of the normal velocity reversed (0 = inelastic).
+        k_parallel: f32,
+        /// Fraction of the tangential velocity kept (1 = frictionless).
+        k_perpendicular: f32,
+    },
+    /// ε_c: largest constraint correction before a step is rejected, metres.
+    ConstraintTolerance(f32),
+    /// Switches the integrator.
+    Integrator(IntegratorKind),
+    /// Replaces the step-size control parameters.
+    Tolerances(Tolerances),
+}
+
+/// Errors of the simulation interface.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// The character cannot be simulated (the message says why).
+    #[error("cannot simulate this character: {0}")]
+    BadCharacter(String),
+    /// A parameter change was refused (the message names the parameter and value).
+    #[error("parameter change refused: {0}")]
+    BadParameter(String),
+    /// A snapshot from another model or resolution, or with non-finite values.
+    #[error("snapshot refused: {0}")]
+    BadSnapshot(String),
+    /// A resolution that cannot be used.
+    #[error("resolution {around}×{along} refused: {reason}")]
+    BadResolution {
+        /// Points around.
+        around: u32,
+        /// Rows along.
+        along: u32,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// A saved model state. Opaque and cheap to clone; only the model that made it can restore it.
+#[derive(Clone)]
+pub struct Snapshot {
+    /// The model kind that made it (e.g. `"surface"`).
+    pub model: &'static str,
+    /// Simulation time of the state, seconds.
+    pub time_s: f64,
+    data: Arc<dyn Any + Send + Sync>,
+}
+
+impl std::fmt::Debug for Snapshot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Snapshot")
+            .field("model", &self.model)
+            .field("time_s", &self.time_s)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Snapshot {
+    /// Wraps a model's state (for model implementations).
+    pub fn new<T: Any + Send + Sync>(model: &'static str, time_s: f64, data: T) -> Self {
+        Self {
+            model,
+            time_s,
+            data: Arc::new(data),
+        }
+    }
+
+    /// The model's state, if it is of type `T` (for model implementations).
+    pub fn data<T: Any>(&self) -> Option<&T> {
+        self.data.downcast_ref::<T>()
+    }
+}
+
+/// The one interface both deformation models implement (see the module docs).
+pub trait DeformationModel {
+    /// Short name of the model kind (`"surface"`, `"lattice"`).
+    fn model_name(&self) -> &'static str;
+
+    /// Current simulation time, seconds.
+    fn time_s(&self) -> f64;
+
+    /// Advances towards `target_time_s`, asking `budget` before every step attempt, with the
+    /// skeleton from `poses`. Stops at the target (the last step is shortened to land on it) or
+    /// when the budget says no. `clock`, when given, is read only to fill the report's phase
+    /// times. Never leaves a non-finite state behind.
+    fn advance(
+        &mut self,
+        target_time_s: f64,
+        poses: &mut dyn PoseSource,
+        budget: &mut dyn StepBudget,
+        clock: Option<&dyn Clock>,
+    ) -> AdvanceReport;
+
+    /// Writes the deformed surface into `out` (reusing its storage).
+    fn surface_mesh_into(&self, out: &mut SurfaceMesh);
+
+    /// Applies a parameter change (takes effect at the next step).
+    fn apply(&mut self, change: &ParameterChange) -> Result<(), SimError>;
+
+    /// The current state (positions, velocities, time, step size, materials).
+    fn snapshot(&self) -> Snapshot;
+
+    /// Returns to a state made by [`snapshot`](Self::snapshot) of this model; a snapshot of
+    /// another model or resolution is refused and nothing changes.
+    fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError>;
+
+    /// `(around, along)` resolution of the surface.
+    fn resolution(&self) -> (u32, u32);
+
+    /// Resamples the model to a new resolution (LEMAN 6.5: bilinear interpolation of every
+    /// per-point value).
+    fn set_resolution(&mut self, around: u32, along: u32) -> Result<(), SimError>;
+
+    /// Number of simulated surface points (for cost measures such as point-steps per second).
+    fn point_count(&self) -> usize;
+}

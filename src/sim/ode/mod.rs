@@ -19,6 +19,8 @@
 //! - [`IntegratorKind::Rk2`]: adaptive Runge-Kutta 2(1) (Heun with embedded Euler).
 //! - [`IntegratorKind::Rk4`]: classical fourth-order Runge-Kutta with a fixed step.
 
+#![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
+
 #[cfg(test)]
 mod tests;
 

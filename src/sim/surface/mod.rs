@@ -1,1 +1,1047 @@
-//! The LEMAN elastic surface layer model (skin over muscles, fat and connective tissue).
+//! The LEMAN elastic surface layer model (skin over muscles, fat and connective tissue),
+//! paper `003_…` sections 3-4: [`SurfaceModel`] implements [`DeformationModel`].
+//!
+//! One step (see [`SurfaceModel::advance`]):
+//! 1. Skeleton at the end of the attempted step: posture from the [`PoseSource`], forward
+//!    kinematics, shape instances, fixed rows and tissue anchors (the start values are the
+//!    previous step's end; in between they are interpolated linearly, see
+//!    [`forces::StepKinematics`]).
+//! 2. The integrator proposes a candidate state ([`crate::sim::ode`]); its error control may
+//!    reject it (retry with its smaller step).
+//! 3. Guard: a non-finite candidate or an exploding kinetic energy rejects the step (retry with a
+//!    quarter step); a non-finite committed state (which should never happen) is replaced by the
+//!    last good checkpoint.
+//! 4. Constraints ([`constraints`]) push fat points out of muscles; a correction component larger
+//!    than ε_c rejects the step and retries with a smaller step chosen by false position on the
+//!    bracket `[0, h]` (the correction grows about linearly with the step), down to the minimum
+//!    step where it is accepted (counted as forced).
+//! 5. Commit (buffer swap, no copy).
+
+#![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
+
+pub mod constraints;
+pub mod forces;
+mod resample;
+#[cfg(test)]
+mod tests;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use glam::Vec3;
+
+use super::ode::{Integrator, IntegratorKind, SecondOrderSystem, Tolerances};
+use super::{
+    AdvanceReport, DeformationModel, ParameterChange, PoseSource, Selection, SimError, Snapshot,
+    StepBudget, SurfaceMesh,
+};
+use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
+use crate::clock::Clock;
+use constraints::{Broadphase, ConstraintInput};
+use forces::{ForceInput, ForceScratch, Materials, Springs, StepKinematics};
+
+/// Name of this model kind in snapshots and reports.
+pub const MODEL_NAME: &str = "surface";
+
+/// Reference speed of the energy guard: a candidate whose kinetic energy exceeds ten times the
+/// previous one plus that of the whole skin moving at this speed is an explosion.
+const GUARD_SPEED_M_PER_S: f64 = 5.0;
+
+/// The persistent state: everything a snapshot holds.
+#[derive(Debug, Clone)]
+struct Core {
+    character: Arc<Character>,
+    around: usize,
+    along: usize,
+    /// Row 0 in the bottom joint's frame and row N−1 in the top joint's frame (M each).
+    bottom_ring_m: Vec<Vec3>,
+    top_ring_m: Vec<Vec3>,
+    t_s: f64,
+    step_s: f64,
+    x: Vec<f32>,
+    v: Vec<f32>,
+    materials: Materials,
+    springs: Springs,
+    kind: IntegratorKind,
+    tolerances: Tolerances,
+    k_parallel: f32,
+    k_perpendicular: f32,
+    epsilon_c_m: f32,
+}
+
+/// Scratch and caches (not part of a snapshot).
+#[derive(Debug, Clone, Default)]
+struct Work {
+    integrator: Option<Integrator>,
+    kin: StepKinematics,
+    start_valid: bool,
+    shapes_start: Vec<ShapeInstance>,
+    shapes_end: Vec<ShapeInstance>,
+    posture: Posture,
+    pose: SkeletonPose,
+    x_new: Vec<f32>,
+    v_new: Vec<f32>,
+    force: ForceScratch,
+    normals: [Vec<f32>; 3],
+    broad: Broadphase,
+    checkpoint_x: Vec<f32>,
+    checkpoint_v: Vec<f32>,
+    checkpoint_t_s: f64,
+}
+
+/// The elastic surface layer model of one character.
+#[derive(Debug, Clone)]
+pub struct SurfaceModel {
+    core: Core,
+    work: Work,
+}
+
+/// The `SecondOrderSystem` view of the forces for one step, with optional timing.
+struct Eval<'a> {
+    input: ForceInput<'a>,
+    scratch: &'a mut ForceScratch,
+    clock: Option<&'a dyn Clock>,
+    force_time: Duration,
+}
+
+impl Eval<'_> {
+    fn now(&self) -> Option<Duration> {
+        self.clock.map(|c| c.now())
+    }
+    fn add_time(&mut self, since: Option<Duration>) {
+        if let (Some(start), Some(c)) = (since, self.clock) {
+            self.force_time += c.now().saturating_sub(start);
+        }
+    }
+}
+
+impl SecondOrderSystem for Eval<'_> {
+    fn dofs(&self) -> usize {
+        3 * self.input.around * (self.input.along - 2)
+    }
+    fn position_accel(&mut self, t_s: f64, x: &[f32], a: &mut [f32]) {
+        let start = self.now();
+        forces::position_accel(&self.input, self.scratch, t_s, x, a);
+        self.add_time(start);
+    }
+    fn add_velocity_accel(&mut self, _t_s: f64, _x: &[f32], v: &[f32], a: &mut [f32]) {
+        let start = self.now();
+        forces::add_velocity_accel(&self.input, self.scratch, v, a);
+        self.add_time(start);
+    }
+}
+
+fn soa(points: impl ExactSizeIterator<Item = Vec3>) -> [Vec<f32>; 3] {
+    let n = points.len();
+    let mut out = [
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    ];
+    for p in points {
+        out[0].push(p.x);
+        out[1].push(p.y);
+        out[2].push(p.z);
+    }
+    out
+}
+
+impl SurfaceModel {
+    /// A model of `character` at its skin's resolution, state at rest in the neutral posture at
+    /// time 0, parameters from the character's simulation defaults.
+    pub fn new(character: Character, kind: IntegratorKind) -> Result<Self, SimError> {
+        character
+            .validate()
+            .map_err(|e| SimError::BadCharacter(e.to_string()))?;
+        let core = Core::from_character(Arc::new(character), kind)?;
+        let mut work = Work::default();
+        work.broad.margin_m = 0.02;
+        Ok(Self { core, work })
+    }
+
+    /// The character being simulated (at its original resolution).
+    pub fn character(&self) -> &Character {
+        &self.core.character
+    }
+
+    /// Current integrator.
+    pub fn integrator(&self) -> IntegratorKind {
+        self.core.kind
+    }
+
+    /// Current step-size parameters.
+    pub fn tolerances(&self) -> Tolerances {
+        self.core.tolerances
+    }
+
+    /// ε_c, metres.
+    pub fn epsilon_c_m(&self) -> f32 {
+        self.core.epsilon_c_m
+    }
+
+    /// The step size the model will try next, seconds.
+    pub fn next_step_s(&self) -> f64 {
+        self.core.step_s
+    }
+
+    /// Positions of every skin point (fixed rows included, index `j·M + i`) at the current time,
+    /// for a skeleton posture `posture` (which places the fixed rows).
+    pub fn positions_m(&self) -> Vec<Vec3> {
+        let grid = self.current_grid();
+        (0..grid[0].len())
+            .map(|k| Vec3::new(grid[0][k], grid[1][k], grid[2][k]))
+            .collect()
+    }
+
+    /// Velocities of the free points (rows 1..N−2), m/s.
+    pub fn free_velocities(&self) -> Vec<Vec3> {
+        let free = self.core.free();
+        (0..free)
+            .map(|f| {
+                Vec3::new(
+                    self.core.v[f],
+                    self.core.v[free + f],
+                    self.core.v[2 * free + f],
+                )
+            })
+            .collect()
+    }
+
+    /// Deepest penetration of any fat point into any muscle for the current state, metres
+    /// (brute force over all points and shapes; for tests and checks).
+    pub fn max_depth_m(&self) -> f32 {
+        let grid = self.current_grid();
+        let mut normals = Default::default();
+        forces::grid_normals(self.core.around, self.core.along, &grid, &mut normals);
+        let shapes = if self.work.start_valid {
+            self.work.shapes_start.clone()
+        } else {
+            let mut pose = SkeletonPose::default();
+            let posture = Posture::neutral(&self.core.character.skeleton);
+            self.core
+                .character
+                .skeleton
+                .forward_kinematics_into(&posture, &mut pose);
+            let mut out = Vec::new();
+            self.core.character.shape_instances_into(
+                &posture,
+                &pose,
+                self.core.t_s as f32,
+                &mut out,
+            );
+            out
+        };
+        constraints::max_depth_m(
+            self.core.around,
+            self.core.along,
+            &grid,
+            &normals,
+            &self.core.materials.fat_m,
+            &shapes,
+        )
+    }
+
+    /// Number of candidate-list rebuilds of the constraint broadphase so far.
+    pub fn broadphase_rebuilds(&self) -> u64 {
+        self.work.broad.rebuilds
+    }
+
+    fn current_grid(&self) -> [Vec<f32>; 3] {
+        let mut grid: [Vec<f32>; 3] = Default::default();
+        let rings = if self.work.start_valid {
+            self.work.kin.rings_start.clone()
+        } else {
+            // Fixed rows at the neutral posture.
+            let skin_rings = self.core.neutral_rings();
+            soa(skin_rings.into_iter())
+        };
+        forces::assemble_grid(
+            self.core.around,
+            self.core.along,
+            &self.core.x,
+            &rings,
+            &rings,
+            0.0,
+            &mut grid,
+        );
+        grid
+    }
+
+    /// Skeleton-driven kinematics at time `t_s` into the "end" slots of the work area.
+    fn kinematics_end(&mut self, t_s: f64, poses: &mut dyn PoseSource) {
+        let w = &mut self.work;
+        kinematics_into(
+            &self.core,
+            t_s,
+            poses,
+            &mut w.posture,
+            &mut w.pose,
+            &mut w.shapes_end,
+            &mut w.kin.rings_end,
+            &mut w.kin.anchors_end,
+        );
+    }
+
+    fn ensure_start(&mut self, poses: &mut dyn PoseSource) {
+        if self.work.start_valid {
+            return;
+        }
+        let w = &mut self.work;
+        kinematics_into(
+            &self.core,
+            self.core.t_s,
+            poses,
+            &mut w.posture,
+            &mut w.pose,
+            &mut w.shapes_start,
+            &mut w.kin.rings_start,
+            &mut w.kin.anchors_start,
+        );
+        w.start_valid = true;
+    }
+
+    fn save_checkpoint(&mut self) {
+        if self.core.x.iter().all(|x| x.is_finite()) && self.core.v.iter().all(|x| x.is_finite()) {
+            self.work.checkpoint_x.clone_from(&self.core.x);
+            self.work.checkpoint_v.clone_from(&self.core.v);
+            self.work.checkpoint_t_s = self.core.t_s;
+        }
+    }
+
+    fn restore_checkpoint(&mut self) {
+        if self.work.checkpoint_x.len() == self.core.x.len() {
+            self.core.x.clone_from(&self.work.checkpoint_x);
+            self.core.v.clone_from(&self.work.checkpoint_v);
+            self.core.t_s = self.work.checkpoint_t_s;
+        } else {
+            // No checkpoint at this resolution: back to rest at the neutral posture.
+            let rest = Core::rest_state(&self.core);
+            self.core.x = rest;
+            self.core.v.iter_mut().for_each(|v| *v = 0.0);
+        }
+        self.core.step_s = self.core.tolerances.min_step_s;
+        self.work.start_valid = false;
+        self.work.broad.invalidate();
+    }
+
+    /// One step attempt from the current state towards at most `h_s`. Returns what happened.
+    fn attempt(
+        &mut self,
+        h_s: f64,
+        poses: &mut dyn PoseSource,
+        clock: Option<&dyn Clock>,
+        report: &mut AdvanceReport,
+    ) -> Attempt {
+        let t0 = self.core.t_s;
+        self.kinematics_end(t0 + h_s, poses);
+        let core = &mut self.core;
+        let w = &mut self.work;
+        w.kin.t0_s = t0;
+        w.kin.h_s = h_s;
+        let integ = w
+            .integrator
+            .get_or_insert_with(|| Integrator::new(core.kind, core.tolerances));
+        integ.set_kind(core.kind);
+        integ.tolerances = core.tolerances;
+        let n = core.x.len();
+        w.x_new.resize(n, 0.0);
+        w.v_new.resize(n, 0.0);
+        let mut eval = Eval {
+            input: ForceInput {
+                around: core.around,
+                along: core.along,
+                materials: &core.materials,
+                springs: &core.springs,
+                kin: &w.kin,
+            },
+            scratch: &mut w.force,
+            clock,
+            force_time: Duration::ZERO,
+        };
+        let p = integ.propose(
+            &mut eval,
+            t0,
+            h_s,
+            &core.x,
+            &core.v,
+            &mut w.x_new,
+            &mut w.v_new,
+        );
+        report.phases.force += eval.force_time;
+        report.force_evals += u64::from(p.position_evals);
+        report.velocity_evals += u64::from(p.velocity_evals);
+        if !p.accepted {
+            return Attempt::ErrorRejected {
+                next_s: p.next_step_s,
+            };
+        }
+        // Guard: finite and no energy explosion.
+        let mut max_speed2 = 0.0f32;
+        let free = core.free();
+        let mut finite = true;
+        for f in 0..free {
+            let (vx, vy, vz) = (w.v_new[f], w.v_new[free + f], w.v_new[2 * free + f]);
+            let s2 = vx * vx + vy * vy + vz * vz;
+            finite &= s2.is_finite()
+                && w.x_new[f].is_finite()
+                && w.x_new[free + f].is_finite()
+                && w.x_new[2 * free + f].is_finite();
+            max_speed2 = max_speed2.max(s2);
+        }
+        if !finite {
+            return Attempt::NonFinite;
+        }
+        let ke_new = forces::kinetic_energy(&core.materials, &w.v_new);
+        let ke_old = forces::kinetic_energy(&core.materials, &core.v);
+        let total_mass: f64 = core.materials.mass_kg.iter().map(|m| f64::from(*m)).sum();
+        let limit = 10.0 * ke_old + 0.5 * total_mass * GUARD_SPEED_M_PER_S * GUARD_SPEED_M_PER_S;
+        if ke_new.is_nan() || ke_new > limit {
+            return Attempt::NonFinite;
+        }
+        // Constraints on the candidate.
+        let c_start = clock.map(|c| c.now());
+        forces::assemble_grid(
+            core.around,
+            core.along,
+            &w.x_new,
+            &w.kin.rings_end,
+            &w.kin.rings_end,
+            0.0,
+            &mut w.force.grid,
+        );
+        forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
+        let max_fat = core.materials.fat_m.iter().fold(0.0f32, |a, b| a.max(*b));
+        let input = ConstraintInput {
+            around: core.around,
+            along: core.along,
+            shapes_end: &w.shapes_end,
+            shapes_start: &w.shapes_start,
+            h_s: h_s as f32,
+            fat_m: &core.materials.fat_m,
+            max_fat_m: max_fat,
+            k_parallel: core.k_parallel,
+            k_perpendicular: core.k_perpendicular,
+            max_speed_m_per_s: max_speed2.sqrt(),
+        };
+        let outcome = constraints::enforce(
+            &input,
+            &mut w.broad,
+            &mut w.force.grid,
+            &w.normals,
+            &mut w.x_new,
+            &mut w.v_new,
+        );
+        if let (Some(start), Some(c)) = (c_start, clock) {
+            report.phases.constraints += c.now().saturating_sub(start);
+        }
+        let at_min = h_s <= core.tolerances.min_step_s * (1.0 + 1e-9);
+        if outcome.max_component_m > core.epsilon_c_m && !at_min {
+            // False position on [0, h]: the correction is about proportional to h.
+            let ratio = f64::from(core.epsilon_c_m / outcome.max_component_m);
+            let h_c = (h_s * 0.8 * ratio)
+                .min(0.5 * h_s)
+                .max(core.tolerances.min_step_s);
+            return Attempt::ConstraintRejected { retry_s: h_c };
+        }
+        Attempt::Accepted {
+            next_s: p.next_step_s,
+            forced: p.forced || outcome.max_component_m > core.epsilon_c_m,
+            correction_m: outcome.max_correction_m,
+        }
+    }
+
+    fn commit(&mut self, h_s: f64) {
+        let core = &mut self.core;
+        let w = &mut self.work;
+        std::mem::swap(&mut core.x, &mut w.x_new);
+        std::mem::swap(&mut core.v, &mut w.v_new);
+        core.t_s += h_s;
+        std::mem::swap(&mut w.shapes_start, &mut w.shapes_end);
+        std::mem::swap(&mut w.kin.rings_start, &mut w.kin.rings_end);
+        std::mem::swap(&mut w.kin.anchors_start, &mut w.kin.anchors_end);
+        w.start_valid = true;
+    }
+}
+
+enum Attempt {
+    ErrorRejected {
+        next_s: f64,
+    },
+    ConstraintRejected {
+        retry_s: f64,
+    },
+    NonFinite,
+    Accepted {
+        next_s: f64,
+        forced: bool,
+        correction_m: f32,
+    },
+}
+
+#[allow(clippy::too_many_arguments)]
+fn kinematics_into(
+    core: &Core,
+    t_s: f64,
+    poses: &mut dyn PoseSource,
+    posture: &mut Posture,
+    pose: &mut SkeletonPose,
+    shapes: &mut Vec<ShapeInstance>,
+    rings: &mut [Vec<f32>; 3],
+    anchors: &mut [Vec<f32>; 3],
+) {
+    let ch = &core.character;
+    poses.posture_at(t_s, posture);
+    ch.skeleton.forward_kinematics_into(posture, pose);
+    ch.shape_instances_into(posture, pose, t_s as f32, shapes);
+    let m = core.around;
+    for r in rings.iter_mut() {
+        r.resize(2 * m, 0.0);
+    }
+    let bottom = pose.world_from(ch.skin.bottom_joint);
+    let top = pose.world_from(ch.skin.top_joint);
+    for i in 0..m {
+        let b = bottom.transform_point(core.bottom_ring_m[i]);
+        let t = top.transform_point(core.top_ring_m[i]);
+        for (c, (bv, tv)) in [(b.x, t.x), (b.y, t.y), (b.z, t.z)].into_iter().enumerate() {
+            rings[c][i] = bv;
+            rings[c][m + i] = tv;
+        }
+    }
+    let s = &core.springs;
+    for a in anchors.iter_mut() {
+        a.resize(s.len(), 0.0);
+    }
+    for q in 0..s.len() {
+        let p = match shapes.get(s.shape[q] as usize) {
+            Some(inst) => inst.rest_point_to_world(s.anchor_rest_m[q]),
+            None => Vec3::ZERO,
+        };
+        anchors[0][q] = p.x;
+        anchors[1][q] = p.y;
+        anchors[2][q] = p.z;
+    }
+}
+
+impl Core {
+    fn free(&self) -> usize {
+        self.around * (self.along - 2)
+    }
+
+    fn from_character(character: Arc<Character>, kind: IntegratorKind) -> Result<Self, SimError> {
+        let skin = &character.skin;
+        let (m, n) = (skin.around as usize, skin.along as usize);
+        if m < 3 || n < 3 {
+            return Err(SimError::BadCharacter(format!(
+                "skin resolution {m}×{n} is below 3×3"
+            )));
+        }
+        let total = m * n;
+        let free = m * (n - 2);
+        let mut x = vec![0.0f32; 3 * free];
+        for f in 0..free {
+            let p = skin.positions_m[m + f];
+            x[f] = p.x;
+            x[free + f] = p.y;
+            x[2 * free + f] = p.z;
+        }
+        let sym = |v: &[[f32; 3]]| -> [Vec<f32>; 3] {
+            [
+                v.iter().map(|t| t[0]).collect(),
+                v.iter().map(|t| t[1]).collect(),
+                v.iter().map(|t| t[2]).collect(),
+            ]
+        };
+        let mass: Vec<f32> = skin.mass_kg[m..m + free].to_vec();
+        let damping: Vec<f32> = skin.damping_n_s_per_m[m..m + free].to_vec();
+        let xi = sym(&skin.bending);
+        let has_bending = xi.iter().any(|a| a.iter().any(|v| *v > 0.0));
+        let mut materials = Materials {
+            eta: sym(&skin.stretch),
+            rest_metric: sym(&skin.rest_metric),
+            xi,
+            rest_curvature: [vec![0.0; total], vec![0.0; total], vec![0.0; total]],
+            has_bending,
+            inv_mass: mass.iter().map(|m| 1.0 / m).collect(),
+            damping_per_mass: damping.iter().zip(&mass).map(|(d, m)| d / m).collect(),
+            mass_kg: mass,
+            damping,
+            fat_m: skin.fat_m[m..m + free].to_vec(),
+            gravity: character.simulation.gravity_m_per_s2,
+        };
+        let grid = soa(skin.positions_m.iter().copied());
+        materials.rest_curvature = rest_curvature(m, n, &grid);
+        let mut springs = Springs::default();
+        for (k, t) in character.tissue.iter().enumerate() {
+            let idx = t.skin_point as usize;
+            if idx < m || idx >= m + free {
+                continue; // on a fixed row: no effect
+            }
+            springs.point.push((idx - m) as u32);
+            springs.source.push(k as u32);
+            springs.ks.push(t.stiffness_n_per_m);
+            springs.kd.push(t.damping_n_s_per_m);
+            springs.rest_m.push(t.rest_length_m);
+            springs.shape.push(t.shape.0);
+            springs.anchor_rest_m.push(t.anchor_rest_m);
+        }
+        let d = character.simulation;
+        let tolerances = Tolerances {
+            fixed_step_s: f64::from(d.euler_step_s),
+            min_step_s: f64::from(d.min_step_s),
+            max_step_s: f64::from(d.max_step_s),
+            position_tolerance: f64::from(d.epsilon_r),
+            velocity_tolerance: f64::from(d.epsilon_v),
+            position_threshold_m: f64::from(d.r_threshold_m),
+            velocity_threshold_m_per_s: f64::from(d.v_threshold_m_per_s),
+            ..Tolerances::default()
+        };
+        let step_s = initial_step(kind, &tolerances);
+        Ok(Self {
+            around: m,
+            along: n,
+            bottom_ring_m: skin.bottom_ring_m.clone(),
+            top_ring_m: skin.top_ring_m.clone(),
+            t_s: 0.0,
+            step_s,
+            v: vec![0.0; x.len()],
+            x,
+            materials,
+            springs,
+            kind,
+            tolerances,
+            k_parallel: d.k_parallel,
+            k_perpendicular: d.k_perpendicular,
+            epsilon_c_m: d.epsilon_c_m,
+            character,
+        })
+    }
+
+    fn neutral_rings(&self) -> Vec<Vec3> {
+        let ch = &self.character;
+        let pose = ch
+            .skeleton
+            .forward_kinematics(&Posture::neutral(&ch.skeleton));
+        let b = pose.world_from(ch.skin.bottom_joint);
+        let t = pose.world_from(ch.skin.top_joint);
+        let mut out: Vec<Vec3> = self
+            .bottom_ring_m
+            .iter()
+            .map(|p| b.transform_point(*p))
+            .collect();
+        out.extend(self.top_ring_m.iter().map(|p| t.transform_point(*p)));
+        out
+    }
+
+    /// The free points of the character's own rest shape, if the resolution matches; else the
+    /// current state (used when a checkpoint is missing).
+    fn rest_state(&self) -> Vec<f32> {
+        let skin = &self.character.skin;
+        if skin.around as usize == self.around && skin.along as usize == self.along {
+            let free = self.free();
+            let mut x = vec![0.0; 3 * free];
+            for f in 0..free {
+                let p = skin.positions_m[self.around + f];
+                x[f] = p.x;
+                x[free + f] = p.y;
+                x[2 * free + f] = p.z;
+            }
+            x
+        } else {
+            self.x.clone()
+        }
+    }
+}
+
+fn initial_step(kind: IntegratorKind, t: &Tolerances) -> f64 {
+    Integrator::new(kind, *t).initial_step_s()
+}
+
+/// Rest curvature `B⁰_ij = n̂·D_ij r` of a full grid (0 on the fixed rows).
+fn rest_curvature(m: usize, n: usize, grid: &[Vec<f32>; 3]) -> [Vec<f32>; 3] {
+    let mut normals = Default::default();
+    forces::grid_normals(m, n, grid, &mut normals);
+    let total = m * n;
+    let mut out = [vec![0.0; total], vec![0.0; total], vec![0.0; total]];
+    let at = |k: usize| Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
+    let idx = |i: usize, j: usize| j * m + (i % m);
+    let (inv_h1, inv_h2) = (m as f32, (n - 1) as f32);
+    for j in 1..n - 1 {
+        for i in 0..m {
+            let k = j * m + i;
+            let nk = Vec3::new(normals[0][k], normals[1][k], normals[2][k]);
+            let p = at(k);
+            let d11 = (at(idx(i + 1, j)) - 2.0 * p + at(idx(i + m - 1, j))) * (inv_h1 * inv_h1);
+            let d22 = (at(idx(i, j + 1)) - 2.0 * p + at(idx(i, j - 1))) * (inv_h2 * inv_h2);
+            let d12 = (at(idx(i + 1, j + 1)) - at(idx(i + 1, j)) - at(idx(i, j + 1)) + p)
+                * (inv_h1 * inv_h2);
+            out[0][k] = nk.dot(d11);
+            out[1][k] = nk.dot(d12);
+            out[2][k] = nk.dot(d22);
+        }
+    }
+    out
+}
+
+fn check_value(what: &str, v: f32, strictly_positive: bool) -> Result<(), SimError> {
+    let ok = v.is_finite() && if strictly_positive { v > 0.0 } else { v >= 0.0 };
+    if ok {
+        Ok(())
+    } else {
+        Err(SimError::BadParameter(format!(
+            "{what} must be finite and {} 0, got {v}",
+            if strictly_positive { ">" } else { ">=" }
+        )))
+    }
+}
+
+fn selected(sel: &Selection, len: usize, what: &str) -> Result<Vec<usize>, SimError> {
+    match sel {
+        Selection::All => Ok((0..len).collect()),
+        Selection::Some(ids) => ids
+            .iter()
+            .map(|&i| {
+                let i = i as usize;
+                if i < len {
+                    Ok(i)
+                } else {
+                    Err(SimError::BadParameter(format!(
+                        "{what} index {i} is out of range (0..{len})"
+                    )))
+                }
+            })
+            .collect(),
+    }
+}
+
+impl DeformationModel for SurfaceModel {
+    fn model_name(&self) -> &'static str {
+        MODEL_NAME
+    }
+
+    fn time_s(&self) -> f64 {
+        self.core.t_s
+    }
+
+    fn advance(
+        &mut self,
+        target_time_s: f64,
+        poses: &mut dyn PoseSource,
+        budget: &mut dyn StepBudget,
+        clock: Option<&dyn Clock>,
+    ) -> AdvanceReport {
+        let begin = clock.map(|c| c.now());
+        let mut report = AdvanceReport::default();
+        let bad_state = !(self.core.x.iter().all(|x| x.is_finite())
+            && self.core.v.iter().all(|x| x.is_finite()));
+        if bad_state {
+            report.nonfinite_events += 1;
+            self.restore_checkpoint();
+        } else {
+            self.save_checkpoint();
+        }
+        self.ensure_start(poses);
+        let min_step = self.core.tolerances.min_step_s;
+        let mut consecutive_failures = 0u32;
+        while target_time_s.is_finite() && self.core.t_s < target_time_s - 1e-9 {
+            if !budget.may_step() {
+                break;
+            }
+            let remaining = target_time_s - self.core.t_s;
+            let planned = self.core.step_s.max(min_step);
+            // Avoid a sliver at the end: split the rest evenly if it is just over one step.
+            let h = if remaining <= planned {
+                remaining
+            } else if remaining < 1.5 * planned {
+                0.5 * remaining
+            } else {
+                planned
+            };
+            match self.attempt(h, poses, clock, &mut report) {
+                Attempt::Accepted {
+                    next_s,
+                    forced,
+                    correction_m,
+                } => {
+                    self.commit(h);
+                    consecutive_failures = 0;
+                    report.steps += 1;
+                    report.forced_steps += u64::from(forced);
+                    report.min_step_s = report.min_step_s.min(h);
+                    report.max_step_s = report.max_step_s.max(h);
+                    report.max_penetration_m = report.max_penetration_m.max(correction_m);
+                    // A step shortened to land on the target does not shrink the next one.
+                    self.core.step_s = if h < planned {
+                        planned.max(next_s)
+                    } else {
+                        next_s
+                    };
+                }
+                Attempt::ErrorRejected { next_s } => {
+                    report.rejected_steps += 1;
+                    self.core.step_s = next_s.min(0.5 * h).max(min_step);
+                    if !self.core.kind.is_adaptive() {
+                        // A fixed-step method only "rejects" on a bug; do not loop.
+                        self.core.step_s = self.core.tolerances.fixed_step_s;
+                    }
+                }
+                Attempt::ConstraintRejected { retry_s } => {
+                    report.rejected_steps += 1;
+                    report.constraint_rejections += 1;
+                    self.core.step_s = retry_s;
+                }
+                Attempt::NonFinite => {
+                    report.rejected_steps += 1;
+                    report.nonfinite_events += 1;
+                    consecutive_failures += 1;
+                    self.core.step_s = (0.25 * h).max(min_step);
+                    if consecutive_failures >= 8 {
+                        // Even tiny steps blow up: go back to the last good state and stop
+                        // for this call (the caller sees nonfinite_events).
+                        self.restore_checkpoint();
+                        break;
+                    }
+                }
+            }
+        }
+        // Fixed-step methods return to their fixed step after a constraint-limited step.
+        if !self.core.kind.is_adaptive() {
+            self.core.step_s = self.core.tolerances.fixed_step_s;
+        }
+        report.time_s = self.core.t_s;
+        report.reached_target = self.core.t_s >= target_time_s - 1e-9;
+        if let (Some(b), Some(c)) = (begin, clock) {
+            let total = c.now().saturating_sub(b);
+            report.phases.other = total
+                .saturating_sub(report.phases.force)
+                .saturating_sub(report.phases.constraints);
+        }
+        report
+    }
+
+    fn surface_mesh_into(&self, out: &mut SurfaceMesh) {
+        let (m, n) = (self.core.around, self.core.along);
+        let grid = self.current_grid();
+        let mut normals = Default::default();
+        forces::grid_normals(m, n, &grid, &mut normals);
+        out.positions_m.clear();
+        out.normals.clear();
+        out.indices.clear();
+        for k in 0..m * n {
+            let p = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
+            let nr = Vec3::new(normals[0][k], normals[1][k], normals[2][k]);
+            out.positions_m
+                .push(if p.is_finite() { p } else { Vec3::ZERO });
+            out.normals.push(if nr.is_finite() { nr } else { Vec3::Y });
+        }
+        for j in 0..n - 1 {
+            for i in 0..m {
+                let ip = (i + 1) % m;
+                let p00 = (j * m + i) as u32;
+                let p10 = (j * m + ip) as u32;
+                let p01 = ((j + 1) * m + i) as u32;
+                let p11 = ((j + 1) * m + ip) as u32;
+                out.indices
+                    .extend_from_slice(&[p00, p01, p11, p00, p11, p10]);
+            }
+        }
+    }
+
+    fn apply(&mut self, change: &ParameterChange) -> Result<(), SimError> {
+        let core = &mut self.core;
+        let free = core.free();
+        let total = core.around * core.along;
+        match change {
+            ParameterChange::Stretch(sel, eta) => {
+                for (c, v) in eta.iter().enumerate() {
+                    check_value("stretch", *v, false)?;
+                    let _ = c;
+                }
+                for k in selected(sel, total, "skin point")? {
+                    for c in 0..3 {
+                        core.materials.eta[c][k] = eta[c];
+                    }
+                }
+            }
+            ParameterChange::Bending(sel, xi) => {
+                for v in xi {
+                    check_value("bending", *v, false)?;
+                }
+                for k in selected(sel, total, "skin point")? {
+                    for c in 0..3 {
+                        core.materials.xi[c][k] = xi[c];
+                    }
+                }
+                core.materials.has_bending =
+                    core.materials.xi.iter().any(|a| a.iter().any(|v| *v > 0.0));
+            }
+            ParameterChange::RestMetricScale(sel, s) => {
+                check_value("rest metric scale", *s, true)?;
+                for k in selected(sel, total, "skin point")? {
+                    for c in 0..3 {
+                        core.materials.rest_metric[c][k] *= s;
+                    }
+                }
+            }
+            ParameterChange::Mass(sel, kg) => {
+                check_value("mass", *kg, true)?;
+                for k in selected(sel, total, "skin point")? {
+                    if k >= core.around && k < core.around + free {
+                        let f = k - core.around;
+                        let mat = &mut core.materials;
+                        mat.mass_kg[f] = *kg;
+                        mat.inv_mass[f] = 1.0 / kg;
+                        mat.damping_per_mass[f] = mat.damping[f] / kg;
+                    }
+                }
+            }
+            ParameterChange::Damping(sel, d) => {
+                check_value("damping", *d, false)?;
+                for k in selected(sel, total, "skin point")? {
+                    if k >= core.around && k < core.around + free {
+                        let f = k - core.around;
+                        let mat = &mut core.materials;
+                        mat.damping[f] = *d;
+                        mat.damping_per_mass[f] = d / mat.mass_kg[f];
+                    }
+                }
+            }
+            ParameterChange::Fat(sel, fat) => {
+                check_value("fat", *fat, false)?;
+                for k in selected(sel, total, "skin point")? {
+                    if k >= core.around && k < core.around + free {
+                        core.materials.fat_m[k - core.around] = *fat;
+                    }
+                }
+                self.work.broad.invalidate();
+            }
+            ParameterChange::TissueStiffness(sel, ks) => {
+                check_value("tissue stiffness", *ks, false)?;
+                let ids = selected(sel, core.character.tissue.len(), "tissue spring")?;
+                for (q, src) in core.springs.source.iter().enumerate() {
+                    if ids.contains(&(*src as usize)) {
+                        core.springs.ks[q] = *ks;
+                    }
+                }
+            }
+            ParameterChange::TissueDamping(sel, kd) => {
+                check_value("tissue damping", *kd, false)?;
+                let ids = selected(sel, core.character.tissue.len(), "tissue spring")?;
+                for (q, src) in core.springs.source.iter().enumerate() {
+                    if ids.contains(&(*src as usize)) {
+                        core.springs.kd[q] = *kd;
+                    }
+                }
+            }
+            ParameterChange::Gravity(g) => {
+                if !g.is_finite() {
+                    return Err(SimError::BadParameter(format!("gravity {g} is not finite")));
+                }
+                core.materials.gravity = *g;
+            }
+            ParameterChange::Contact {
+                k_parallel,
+                k_perpendicular,
+            } => {
+                check_value("k_parallel", *k_parallel, false)?;
+                check_value("k_perpendicular", *k_perpendicular, false)?;
+                core.k_parallel = *k_parallel;
+                core.k_perpendicular = *k_perpendicular;
+            }
+            ParameterChange::ConstraintTolerance(eps) => {
+                check_value("epsilon_c", *eps, true)?;
+                core.epsilon_c_m = *eps;
+            }
+            ParameterChange::Integrator(kind) => {
+                core.kind = *kind;
+                core.step_s = initial_step(*kind, &core.tolerances);
+            }
+            ParameterChange::Tolerances(t) => {
+                let vals = [
+                    ("fixed_step_s", t.fixed_step_s),
+                    ("min_step_s", t.min_step_s),
+                    ("max_step_s", t.max_step_s),
+                    ("position_tolerance", t.position_tolerance),
+                    ("velocity_tolerance", t.velocity_tolerance),
+                    ("position_threshold_m", t.position_threshold_m),
+                    ("velocity_threshold_m_per_s", t.velocity_threshold_m_per_s),
+                    ("safety", t.safety),
+                    ("max_growth", t.max_growth),
+                    ("max_shrink", t.max_shrink),
+                ];
+                for (name, v) in vals {
+                    check_value(name, v as f32, true)?;
+                }
+                if t.max_step_s < t.min_step_s {
+                    return Err(SimError::BadParameter(format!(
+                        "max_step_s {} is below min_step_s {}",
+                        t.max_step_s, t.min_step_s
+                    )));
+                }
+                core.tolerances = *t;
+                core.step_s = initial_step(core.kind, t);
+            }
+        }
+        Ok(())
+    }
+
+    fn snapshot(&self) -> Snapshot {
+        Snapshot::new(MODEL_NAME, self.core.t_s, self.core.clone())
+    }
+
+    fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError> {
+        if snapshot.model != MODEL_NAME {
+            return Err(SimError::BadSnapshot(format!(
+                "made by the {} model, not the {MODEL_NAME} model",
+                snapshot.model
+            )));
+        }
+        let Some(core) = snapshot.data::<Core>() else {
+            return Err(SimError::BadSnapshot("unreadable surface state".into()));
+        };
+        if !Arc::ptr_eq(&core.character, &self.core.character)
+            && *core.character != *self.core.character
+        {
+            return Err(SimError::BadSnapshot(
+                "made from a different character".into(),
+            ));
+        }
+        if !(core.x.iter().all(|v| v.is_finite()) && core.v.iter().all(|v| v.is_finite())) {
+            return Err(SimError::BadSnapshot("holds non-finite values".into()));
+        }
+        self.core = core.clone();
+        self.work.start_valid = false;
+        self.work.broad.invalidate();
+        self.work.checkpoint_x.clear();
+        self.save_checkpoint();
+        Ok(())
+    }
+
+    fn resolution(&self) -> (u32, u32) {
+        (self.core.around as u32, self.core.along as u32)
+    }
+
+    fn set_resolution(&mut self, around: u32, along: u32) -> Result<(), SimError> {
+        if !(3..=1024).contains(&around) || !(3..=1024).contains(&along) {
+            return Err(SimError::BadResolution {
+                around,
+                along,
+                reason: "each side must be between 3 and 1024".into(),
+            });
+        }
+        let current_rings = if self.work.start_valid {
+            Some(self.work.kin.rings_start.clone())
+        } else {
+            None
+        };
+        self.core = resample::resample(&self.core, around as usize, along as usize, current_rings);
+        self.work.start_valid = false;
+        self.work.broad.invalidate();
+        self.work.checkpoint_x.clear();
+        self.save_checkpoint();
+        Ok(())
+    }
+
+    fn point_count(&self) -> usize {
+        self.core.around * self.core.along
+    }
+}

@@ -1,0 +1,293 @@
+//! Non-penetration (LEMAN 4.1.4, 4.2.3): after an accepted integration step every free skin
+//! point whose fat point `r − τ n̂` (eq. 6) is inside a muscle is moved out to the muscle's
+//! surface (eq. 13a) and its velocity, relative to the muscle's own surface velocity, is split
+//! into a normal part reversed and scaled by k∥ and a tangential part scaled by k⊥ (eq. 13b-d;
+//! the normal part is only reversed when the point moves into the muscle).
+//!
+//! # Acceleration structure
+//! Per-point candidate lists with temporal coherence: each free point keeps the shapes whose
+//! bounding sphere, grown by the point's fat and a margin, contains it. The lists are rebuilt
+//! only when the points' accumulated movement (bounded by `max |v|·h` per step) plus the
+//! shapes' bounding-sphere movement since the last rebuild could exceed the margin, so a shape
+//! can never reach a point that does not list it. Between rebuilds a point tests only its
+//! candidates (first the exact bounding sphere, then the inside/outside function).
+
+#![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
+
+use glam::Vec3;
+
+use crate::character::ShapeInstance;
+
+/// Most candidates a point keeps; beyond that it tests every shape.
+const MAX_CANDIDATES: usize = 8;
+/// Marker for "test every shape".
+const ALL_SHAPES: u8 = u8::MAX;
+
+/// Candidate lists and their validity bookkeeping.
+#[derive(Debug, Clone, Default)]
+pub struct Broadphase {
+    cand: Vec<u8>,
+    count: Vec<u8>,
+    ref_centers: Vec<Vec3>,
+    ref_radii: Vec<f32>,
+    moved_m: f32,
+    valid: bool,
+    /// Margin, metres: larger means fewer rebuilds and more candidates.
+    pub margin_m: f32,
+    /// Rebuilds so far (for tests and reports).
+    pub rebuilds: u64,
+}
+
+impl Broadphase {
+    /// Forces a rebuild at the next pass (after a restore, a resolution or fat change).
+    pub fn invalidate(&mut self) {
+        self.valid = false;
+    }
+}
+
+/// What a constraint pass found.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ConstraintOutcome {
+    /// Largest position component correction, metres (compared with ε_c).
+    pub max_component_m: f32,
+    /// Largest correction length, metres.
+    pub max_correction_m: f32,
+    /// Points moved.
+    pub corrected: u32,
+}
+
+/// Inputs of a constraint pass.
+pub struct ConstraintInput<'a> {
+    /// M.
+    pub around: usize,
+    /// N.
+    pub along: usize,
+    /// Shapes at the end of the step.
+    pub shapes_end: &'a [ShapeInstance],
+    /// Shapes at the start of the step (for the muscles' surface velocity).
+    pub shapes_start: &'a [ShapeInstance],
+    /// Step length, seconds.
+    pub h_s: f32,
+    /// Fat per free point, m.
+    pub fat_m: &'a [f32],
+    /// Largest fat, m.
+    pub max_fat_m: f32,
+    /// k∥.
+    pub k_parallel: f32,
+    /// k⊥.
+    pub k_perpendicular: f32,
+    /// Largest speed of any point in the candidate state (bounds its movement this step).
+    pub max_speed_m_per_s: f32,
+}
+
+impl Broadphase {
+    fn update(&mut self, input: &ConstraintInput<'_>, grid: &[Vec<f32>; 3]) {
+        let shapes = input.shapes_end;
+        let m = input.around;
+        let free = m * (input.along - 2);
+        self.moved_m += input.max_speed_m_per_s * input.h_s;
+        let mut shape_moved = 0.0f32;
+        if self.ref_centers.len() == shapes.len() {
+            for (k, s) in shapes.iter().enumerate() {
+                let d = (s.bound_center_world_m - self.ref_centers[k]).length()
+                    + (s.bound_radius_m - self.ref_radii[k]).max(0.0);
+                shape_moved = shape_moved.max(d);
+            }
+        } else {
+            self.valid = false;
+        }
+        if self.valid && self.moved_m + shape_moved <= self.margin_m && self.count.len() == free {
+            return;
+        }
+        self.rebuilds += 1;
+        self.valid = true;
+        self.moved_m = 0.0;
+        self.ref_centers.clear();
+        self.ref_radii.clear();
+        self.ref_centers
+            .extend(shapes.iter().map(|s| s.bound_center_world_m));
+        self.ref_radii
+            .extend(shapes.iter().map(|s| s.bound_radius_m));
+        self.cand.resize(free * MAX_CANDIDATES, 0);
+        self.count.resize(free, 0);
+        let grow = input.max_fat_m + self.margin_m;
+        let too_many = shapes.len() >= usize::from(ALL_SHAPES);
+        for f in 0..free {
+            let k = m + f;
+            let p = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
+            let mut c = 0usize;
+            let mut overflow = too_many;
+            for (s_idx, s) in shapes.iter().enumerate() {
+                let r = s.bound_radius_m + grow;
+                if (p - s.bound_center_world_m).length_squared() <= r * r {
+                    if c < MAX_CANDIDATES {
+                        self.cand[f * MAX_CANDIDATES + c] = s_idx as u8;
+                        c += 1;
+                    } else {
+                        overflow = true;
+                    }
+                }
+            }
+            self.count[f] = if overflow { ALL_SHAPES } else { c as u8 };
+        }
+    }
+}
+
+/// Applies the constraints to a candidate state in place. `grid` must hold the full grid of the
+/// candidate positions and `normals` its normals. The free points of `x`, `v` and the grid are
+/// updated together.
+pub fn enforce(
+    input: &ConstraintInput<'_>,
+    broad: &mut Broadphase,
+    grid: &mut [Vec<f32>; 3],
+    normals: &[Vec<f32>; 3],
+    x: &mut [f32],
+    v: &mut [f32],
+) -> ConstraintOutcome {
+    broad.update(input, grid);
+    let m = input.around;
+    let free = m * (input.along - 2);
+    let shapes = input.shapes_end;
+    let mut out = ConstraintOutcome::default();
+    let inv_h = if input.h_s > 0.0 {
+        1.0 / input.h_s
+    } else {
+        0.0
+    };
+    for f in 0..free {
+        let count = broad.count[f];
+        if count == 0 {
+            continue;
+        }
+        let k = m + f;
+        let p0 = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
+        let n = Vec3::new(normals[0][k], normals[1][k], normals[2][k]);
+        let fat = input.fat_m[f];
+        let mut q = p0 - n * fat;
+        let mut moved = false;
+        let mut last_normal = Vec3::ZERO;
+        let mut last_shape = usize::MAX;
+        // Two rounds so a point pushed out of one muscle into an overlapping one is fixed too.
+        for _round in 0..2 {
+            let mut changed = false;
+            let list: &[u8] = if count == ALL_SHAPES {
+                &[]
+            } else {
+                &broad.cand[f * MAX_CANDIDATES..f * MAX_CANDIDATES + usize::from(count)]
+            };
+            let n_tests = if count == ALL_SHAPES {
+                shapes.len()
+            } else {
+                list.len()
+            };
+            for t in 0..n_tests {
+                let s_idx = if count == ALL_SHAPES {
+                    t
+                } else {
+                    usize::from(list[t])
+                };
+                let s = &shapes[s_idx];
+                let r = s.bound_radius_m;
+                if (q - s.bound_center_world_m).length_squared() > r * r {
+                    continue;
+                }
+                let local = s.to_shape(q);
+                if s.geometry.value(local) >= 0.0 {
+                    continue;
+                }
+                let on_surface = s.geometry.project(local);
+                let d = s.world_from_shape.transform_vector3(on_surface - local);
+                if !d.is_finite() {
+                    continue;
+                }
+                q += d;
+                let len = d.length();
+                last_normal = if len > 1e-9 {
+                    d / len
+                } else {
+                    s.world_from_shape
+                        .transform_vector3(s.geometry.gradient(on_surface))
+                        .normalize_or_zero()
+                };
+                last_shape = s_idx;
+                moved = true;
+                changed = true;
+            }
+            if !changed {
+                break;
+            }
+        }
+        if !moved {
+            continue;
+        }
+        let p1 = q + n * fat;
+        let d = p1 - p0;
+        out.max_component_m = out
+            .max_component_m
+            .max(d.x.abs())
+            .max(d.y.abs())
+            .max(d.z.abs());
+        out.max_correction_m = out.max_correction_m.max(d.length());
+        out.corrected += 1;
+        x[f] = p1.x;
+        x[free + f] = p1.y;
+        x[2 * free + f] = p1.z;
+        grid[0][k] = p1.x;
+        grid[1][k] = p1.y;
+        grid[2][k] = p1.z;
+        // Velocity relative to the muscle surface (its material point's displacement over the
+        // step), eq. 13b-d.
+        let vel = Vec3::new(v[f], v[free + f], v[2 * free + f]);
+        let surface_vel = match input.shapes_start.get(last_shape) {
+            Some(start) if input.shapes_start.len() == shapes.len() => {
+                let s = &shapes[last_shape];
+                let was = s.world_from_shape.transform_point3(start.to_shape(q));
+                (q - was) * inv_h
+            }
+            _ => Vec3::ZERO,
+        };
+        let rel = vel - surface_vel;
+        let vn = rel.dot(last_normal);
+        let normal_part = last_normal * vn;
+        let tangential = rel - normal_part;
+        let new_normal = if vn < 0.0 {
+            -input.k_parallel * normal_part
+        } else {
+            normal_part
+        };
+        let new_vel = surface_vel + new_normal + input.k_perpendicular * tangential;
+        v[f] = new_vel.x;
+        v[free + f] = new_vel.y;
+        v[2 * free + f] = new_vel.z;
+    }
+    out
+}
+
+/// Deepest penetration of any free point's fat point into any shape, metres (brute force over
+/// every point and shape: for tests and checks, not the hot path).
+pub fn max_depth_m(
+    around: usize,
+    along: usize,
+    grid: &[Vec<f32>; 3],
+    normals: &[Vec<f32>; 3],
+    fat_m: &[f32],
+    shapes: &[ShapeInstance],
+) -> f32 {
+    let m = around;
+    let free = m * (along - 2);
+    let mut worst = 0.0f32;
+    for f in 0..free {
+        let k = m + f;
+        let p = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
+        let n = Vec3::new(normals[0][k], normals[1][k], normals[2][k]);
+        let q = p - n * fat_m[f];
+        for s in shapes {
+            let local = s.to_shape(q);
+            if s.geometry.value(local) < 0.0 {
+                let depth = (s.geometry.project(local) - local).length();
+                worst = worst.max(depth);
+            }
+        }
+    }
+    worst
+}
