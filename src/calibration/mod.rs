@@ -2,10 +2,14 @@
 //! world, sensor to wand tip, head sensor to eyes) and calibration profiles (TOML files in
 //! `calibration/`).
 
+pub mod fit;
 pub mod frames;
+pub mod procedure;
 pub mod profile;
 pub mod screen;
 
+pub use fit::{FitError, FitOptions, ScreenFit, Units, fit_screen};
 pub use frames::{BaselineMode, Eye, HeadEyes, TrackerFrames};
+pub use procedure::{CornerProcedure, ProcedureConfig, ProcedureEvent, Step, WandInput};
 pub use profile::{CalibrationProfile, ProfileError};
 pub use screen::{Corner, ScreenError, ScreenRect};

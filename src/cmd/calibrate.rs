@@ -1,10 +1,303 @@
-//! `leman calibrate`.
+//! `leman calibrate`: the corner-touching screen calibration (live or from a recorded session),
+//! the same fit from recorded corner samples (`--corners`), or a check of a profile (`--check`).
+//! The JSON shapes are documented in docs/calibration.md.
+
+use anyhow::{Context, bail};
+use glam::{Mat4, Quat, Vec3};
+use leman::calibration::{
+    CalibrationProfile, Corner, FitOptions, ScreenFit, ScreenRect, Units, fit_screen,
+};
+use leman::pose::Pose;
+use leman::stereo::{EyeView, ViewSettings, eye_views};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
 
 /// Arguments of `leman calibrate`.
 #[derive(Debug, Default, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Fit the screen from recorded corner samples in this JSON file
+    /// (`{"units": "m"|"cm"|"in", "lower_left": [[x,y,z], ...], "lower_right": [...],
+    /// "upper_left": [...], "upper_right": [...]}`, upper_right optional, world frame).
+    #[arg(long, value_name = "FILE.json", conflicts_with_all = ["check", "replay"])]
+    pub corners: Option<PathBuf>,
+    /// Where to write the calibration profile (TOML).
+    #[arg(long, value_name = "PROFILE.toml")]
+    pub out: Option<PathBuf>,
+    /// Print the screen frame and both eyes' projections for a head pose.
+    #[arg(long)]
+    pub check: bool,
+    /// The calibration profile to check, or to start from when fitting (head, tracker and
+    /// filter settings are kept); the built-in default desktop profile if absent.
+    #[arg(long, value_name = "PROFILE.toml")]
+    pub calibration: Option<PathBuf>,
+    /// Head sensor pose in the world frame for `--check`: x,y,z (metres),qx,qy,qz,qw (unit
+    /// quaternion). Default: the profile's default head pose.
+    #[arg(long, value_name = "x,y,z,qx,qy,qz,qw", allow_hyphen_values = true)]
+    pub head: Option<String>,
+    /// Near clip plane (metres) for `--check`.
+    #[arg(long, value_name = "N")]
+    pub near: Option<f32>,
+    /// Far clip plane (metres) for `--check`.
+    #[arg(long, value_name = "F")]
+    pub far: Option<f32>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Device profile (TOML) for the live procedure; the desktop default if absent.
+    #[arg(long, value_name = "DEVICES.toml")]
+    pub profile: Option<PathBuf>,
+    /// Run the procedure on a recorded device session instead of live devices.
+    #[arg(long, value_name = "SESSION")]
+    pub replay: Option<PathBuf>,
+}
 
 /// Runs `leman calibrate`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("leman calibrate is not built yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.check {
+        return check(&args);
+    }
+    if let Some(corners) = &args.corners {
+        return fit_from_corners(&args, corners);
+    }
+    interactive(&args)
+}
+
+fn base_profile(args: &Args) -> anyhow::Result<CalibrationProfile> {
+    Ok(match &args.calibration {
+        Some(path) => CalibrationProfile::load(path)?,
+        None => CalibrationProfile::default(),
+    })
+}
+
+/// The corner samples file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CornersFile {
+    units: Units,
+    lower_left: Vec<[f64; 3]>,
+    lower_right: Vec<[f64; 3]>,
+    upper_left: Vec<[f64; 3]>,
+    #[serde(default)]
+    upper_right: Option<Vec<[f64; 3]>>,
+}
+
+/// Reads a corners file into metres.
+pub fn read_corners(path: &Path) -> anyhow::Result<leman::calibration::fit::CornerSamples> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read corner samples {}", path.display()))?;
+    let file: CornersFile = serde_json::from_str(&text)
+        .with_context(|| format!("corner samples {}: not the expected JSON", path.display()))?;
+    let scale = f64::from(file.units.metres_per_unit());
+    let mut out = leman::calibration::fit::CornerSamples::new();
+    for (corner, samples) in [
+        (Corner::LowerLeft, Some(file.lower_left)),
+        (Corner::LowerRight, Some(file.lower_right)),
+        (Corner::UpperLeft, Some(file.upper_left)),
+        (Corner::UpperRight, file.upper_right),
+    ] {
+        let Some(samples) = samples else { continue };
+        let mut v = Vec::with_capacity(samples.len());
+        for (i, p) in samples.iter().enumerate() {
+            let m = [p[0] * scale, p[1] * scale, p[2] * scale];
+            if !m.iter().all(|x| x.is_finite() && x.abs() < 1e6) {
+                bail!(
+                    "corner samples {}: {}[{i}] = {p:?} is out of range",
+                    path.display(),
+                    corner.name()
+                );
+            }
+            v.push(Vec3::new(m[0] as f32, m[1] as f32, m[2] as f32));
+        }
+        out.insert(corner, v);
+    }
+    Ok(out)
+}
+
+fn v3(v: Vec3) -> Value {
+    json!([v.x, v.y, v.z])
+}
+
+fn m4(m: &Mat4) -> Value {
+    json!(m.to_cols_array())
+}
+
+fn screen_json(screen: &ScreenRect, residual_m: f32) -> Value {
+    json!({
+        "lower_left": v3(screen.lower_left_m),
+        "lower_right": v3(screen.lower_right_m),
+        "upper_left": v3(screen.upper_left_m),
+        "width_m": screen.width_m(),
+        "height_m": screen.height_m(),
+        "residual_m": residual_m,
+    })
+}
+
+fn fit_json(fit: &ScreenFit, out: Option<&Path>) -> Value {
+    json!({
+        "screen": screen_json(&fit.screen, fit.residual_m),
+        "non_planarity_m": fit.non_planarity_m,
+        "measured_angle_deg": fit.measured_angle_deg,
+        "corners": fit.corners.iter().map(|c| json!({
+            "corner": c.corner.name(),
+            "measured_m": v3(c.measured_m),
+            "kept": c.kept,
+            "rejected": c.rejected,
+            "error_m": c.error_m,
+        })).collect::<Vec<_>>(),
+        "out": out.map(|p| p.display().to_string()),
+    })
+}
+
+fn print_fit(fit: &ScreenFit, out: Option<&Path>, as_json: bool) -> anyhow::Result<()> {
+    if as_json {
+        println!("{}", serde_json::to_string_pretty(&fit_json(fit, out))?);
+        return Ok(());
+    }
+    let s = &fit.screen;
+    println!(
+        "screen {:.4} m x {:.4} m, residual {:.4} m RMS, non-planarity {:.4} m, measured corner angle {:.2} deg",
+        s.width_m(),
+        s.height_m(),
+        fit.residual_m,
+        fit.non_planarity_m,
+        fit.measured_angle_deg
+    );
+    for c in &fit.corners {
+        println!(
+            "  {:<12} kept {:>3}, rejected {:>3}, off the rectangle by {:.4} m",
+            c.corner.name(),
+            c.kept,
+            c.rejected,
+            c.error_m
+        );
+    }
+    if let Some(out) = out {
+        println!("wrote {}", out.display());
+    }
+    Ok(())
+}
+
+/// Saves `fit` into a profile built on `args.calibration` (or the default) at `args.out`.
+fn save_fit(args: &Args, fit: &ScreenFit, name: &str) -> anyhow::Result<()> {
+    let mut profile = base_profile(args)?;
+    profile.screen = fit.screen;
+    profile.residual_m = fit.residual_m;
+    profile.name = name.to_owned();
+    if let Some(out) = &args.out {
+        profile.save(out)?;
+    }
+    print_fit(fit, args.out.as_deref(), args.json)
+}
+
+fn fit_from_corners(args: &Args, corners: &Path) -> anyhow::Result<()> {
+    if args.out.is_none() && !args.json {
+        bail!("--corners needs --out PROFILE.toml (or --json to only print the fit)");
+    }
+    let samples = read_corners(corners)?;
+    let fit = fit_screen(&samples, &FitOptions::default())
+        .with_context(|| format!("cannot fit a screen to {}", corners.display()))?;
+    save_fit(args, &fit, &format!("fitted from {}", corners.display()))
+}
+
+/// Parses `x,y,z,qx,qy,qz,qw`.
+pub fn parse_head(text: &str) -> anyhow::Result<Pose> {
+    let nums: Vec<f32> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--head {text:?}: expected 7 numbers x,y,z,qx,qy,qz,qw"))?;
+    let [x, y, z, qx, qy, qz, qw] = nums[..] else {
+        bail!(
+            "--head {text:?}: expected 7 numbers x,y,z,qx,qy,qz,qw, got {}",
+            nums.len()
+        );
+    };
+    let q = Quat::from_xyzw(qx, qy, qz, qw);
+    if !(nums.iter().all(|v| v.is_finite())) {
+        bail!("--head {text:?}: numbers must be finite");
+    }
+    if (q.length() - 1.0).abs() > 1e-3 {
+        bail!(
+            "--head {text:?}: the quaternion has length {}, must be a unit quaternion",
+            q.length()
+        );
+    }
+    Ok(Pose::new(Vec3::new(x, y, z), q.normalize()))
+}
+
+fn eye_json(v: &EyeView) -> Value {
+    json!({
+        "position_m": v3(v.position_m),
+        "clip_from_world": m4(&v.clip_from_world),
+    })
+}
+
+fn check(args: &Args) -> anyhow::Result<()> {
+    let profile = base_profile(args)?;
+    let head = match &args.head {
+        Some(text) => parse_head(text)?,
+        None => profile.default_head,
+    };
+    let defaults = ViewSettings::default();
+    let settings = ViewSettings {
+        near_m: args.near.unwrap_or(defaults.near_m),
+        far_m: args.far.unwrap_or(defaults.far_m),
+        ..defaults
+    };
+    let views = eye_views(&profile, &head, &settings)?;
+    if views.clamped {
+        eprintln!(
+            "warning: the eyes are closer than {} m to the screen plane (or behind it); they were moved out",
+            settings.min_eye_distance_m
+        );
+    }
+    if args.json {
+        let out = json!({
+            "screen": screen_json(&profile.screen, profile.residual_m),
+            "eyes": {
+                "left": eye_json(&views.left),
+                "right": eye_json(&views.right),
+            },
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    let s = &profile.screen;
+    println!(
+        "profile {:?}: screen {:.4} m x {:.4} m, residual {:.4} m",
+        profile.name,
+        s.width_m(),
+        s.height_m(),
+        profile.residual_m
+    );
+    println!(
+        "  lower_left {:?}, lower_right {:?}, upper_left {:?}, normal {:?}",
+        s.lower_left_m.to_array(),
+        s.lower_right_m.to_array(),
+        s.upper_left_m.to_array(),
+        s.normal().to_array()
+    );
+    for v in [&views.left, &views.right] {
+        let f = &v.frustum;
+        println!(
+            "  {:?} eye at {:?}, {:.4} m from the screen; frustum at near {} m: l {:.5} r {:.5} b {:.5} t {:.5}, far {} m",
+            v.eye,
+            v.position_m.to_array(),
+            v.screen_distance_m,
+            f.near_m,
+            f.left_m,
+            f.right_m,
+            f.bottom_m,
+            f.top_m,
+            f.far_m
+        );
+    }
+    Ok(())
+}
+
+fn interactive(_args: &Args) -> anyhow::Result<()> {
+    bail!(
+        "the interactive procedure (live devices or --replay) is not wired yet; use --corners or --check"
+    )
 }

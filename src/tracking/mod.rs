@@ -2,5 +2,7 @@
 //! expected display time. Pure: samples and their timestamps in, poses out.
 
 pub mod one_euro;
+pub mod predict;
 
 pub use one_euro::{FilterConfig, PoseFilter};
+pub use predict::{PosePredictor, PredictorConfig};
