@@ -11,6 +11,12 @@ pub trait Decoder: Send {
 
     /// Forgets any partial packet (after a reconnect).
     fn reset(&mut self);
+
+    /// Bytes held in a partial packet, waiting for the rest. At the end of a capture these
+    /// are a truncated packet (`leman decode` reports them as dropped).
+    fn pending(&self) -> usize {
+        0
+    }
 }
 
 /// Counts discarded bytes and reports them as one [`DeviceEvent::Dropped`] just before the next
@@ -83,8 +89,7 @@ impl CrFramer {
         self.buf.clear();
     }
 
-    /// Bytes held now (for tests of the bound).
-    #[cfg(test)]
+    /// Bytes held now.
     pub(crate) fn len(&self) -> usize {
         self.buf.len()
     }

@@ -503,6 +503,10 @@ impl Decoder for FastrakDecoder {
         self.buf.clear();
         self.drops.clear();
     }
+
+    fn pending(&self) -> usize {
+        self.buf.len()
+    }
 }
 
 #[cfg(test)]

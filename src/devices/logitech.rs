@@ -147,6 +147,10 @@ impl Decoder for LogitechDecoder {
         self.buf.clear();
         self.drops.clear();
     }
+
+    fn pending(&self) -> usize {
+        self.buf.len()
+    }
 }
 
 #[cfg(test)]

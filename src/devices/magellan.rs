@@ -172,6 +172,10 @@ impl Decoder for MagellanDecoder {
         self.framer.clear();
         self.drops.clear();
     }
+
+    fn pending(&self) -> usize {
+        self.framer.len()
+    }
 }
 
 #[cfg(test)]

@@ -118,7 +118,8 @@ pub fn k_buttons(payload: [u8; 2]) -> Vec<u8> {
 pub fn value_from_raw(raw: [i32; 6]) -> [f32; 6] {
     let mut value = [0.0; 6];
     for i in 0..6 {
-        value[i] = (SIGNS[i] * raw[i] as f32 / SPACEBALL_FULL_SCALE).clamp(-1.0, 1.0);
+        // `+ 0.0` turns the -0.0 of a negated zero into 0.0.
+        value[i] = (SIGNS[i] * raw[i] as f32 / SPACEBALL_FULL_SCALE).clamp(-1.0, 1.0) + 0.0;
     }
     value
 }
@@ -256,6 +257,10 @@ impl Decoder for SpaceballDecoder {
         self.framer.clear();
         self.drops.clear();
         self.seen_dot = false;
+    }
+
+    fn pending(&self) -> usize {
+        self.framer.len()
     }
 }
 
@@ -395,15 +400,9 @@ mod tests {
         for _ in 0..100 {
             dec.feed(&[b'x'; 100], &mut out);
         }
-        assert!(dec.framer_len() <= 2 * MAX_FRAME);
+        assert!(dec.pending() <= 2 * MAX_FRAME);
         dec.feed(&encode_d(0, [1; 6]), &mut out);
         assert_eq!(axes(&out).len(), 1);
         assert_eq!(dropped(&out), 100 * 100);
-    }
-
-    impl SpaceballDecoder {
-        fn framer_len(&self) -> usize {
-            self.framer.len()
-        }
     }
 }

@@ -167,12 +167,13 @@ pub fn split_length_prefixed(bytes: &[u8]) -> (Vec<&[u8]>, usize) {
 /// Normalised, signed values in our frame from raw HID axes.
 pub fn value_from_raw(raw: [i32; 6]) -> [f32; 6] {
     let n = |v: i32| v.clamp(-HID_FULL_SCALE, HID_FULL_SCALE) as f32 / HID_FULL_SCALE as f32;
+    // `+ 0.0` turns the -0.0 of a negated zero into 0.0.
     [
         n(raw[0]),
-        -n(raw[2]),
+        -n(raw[2]) + 0.0,
         n(raw[1]),
         n(raw[3]),
-        -n(raw[5]),
+        -n(raw[5]) + 0.0,
         n(raw[4]),
     ]
 }
