@@ -7,6 +7,7 @@ mod decoder_props;
 pub mod desktop;
 pub mod driver;
 pub mod encode;
+pub mod enumerate;
 pub mod fastrak;
 pub mod hub;
 pub mod logitech;

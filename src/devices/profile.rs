@@ -788,6 +788,27 @@ map.rz = { dead_zone = 0.1 }
     }
 
     #[test]
+    fn committed_profiles_load_and_desktop_matches_the_builtin() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let mut names = Vec::new();
+        for entry in std::fs::read_dir(&dir).expect("devices/") {
+            let path = entry.expect("entry").path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let p = Profile::load(&path).unwrap_or_else(|e| panic!("{e}"));
+                names.push(p.name.clone());
+                if p.name == "desktop" {
+                    assert_eq!(p, Profile::desktop_default());
+                }
+            }
+        }
+        names.sort();
+        assert_eq!(
+            names,
+            ["desktop", "fastrak-spaceball", "opentrack-spacemouse"]
+        );
+    }
+
+    #[test]
     fn desktop_default_round_trips_through_toml() {
         let p = Profile::desktop_default();
         p.validate(Path::new("builtin")).expect("valid");

@@ -1,0 +1,596 @@
+//! End-to-end device tests: fake devices on pseudo-terminal pairs and a loopback UDP socket,
+//! through the real transports, drivers and hub; recording, replay, and the `devices` and
+//! `record` commands. Every wait is bounded.
+#![cfg(unix)]
+
+use glam::{Quat, Vec3};
+use leman::clock::RealClock;
+use leman::devices::decoder::Decoder;
+use leman::devices::encode;
+use leman::devices::fastrak::{FastrakFormat, FastrakSettings, LengthUnit};
+use leman::devices::hub::{DeviceState, Hub, HubOptions, HubSnapshot, TimedEvent};
+use leman::devices::profile::{Profile, Role};
+use leman::devices::replay::Replayer;
+use leman::devices::sample::DeviceEvent;
+use leman::devices::session::{Record, Session};
+use leman::devices::spaceball::SpaceballDecoder;
+use leman::devices::transport::udp::UdpTransport;
+use leman::devices::transport::{FnOpener, Opener, Transport};
+use leman::pose::Pose;
+use serialport::{SerialPort, TTYPort};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, mpsc};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+const WAIT: Duration = Duration::from_secs(8);
+
+fn wait_until(hub: &Hub, what: &str, cond: impl Fn(&HubSnapshot) -> bool) -> HubSnapshot {
+    let start = Instant::now();
+    loop {
+        let snap = hub.snapshot();
+        if cond(&snap) {
+            return snap;
+        }
+        if start.elapsed() > WAIT {
+            panic!("timed out waiting for {what}; last snapshot: {snap:#?}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Kind {
+    Spaceball([i16; 6]),
+    Fastrak,
+}
+
+/// A fake serial device on the master side of a pseudo-terminal: it answers the
+/// initialisation commands and then streams packets, each written in fragments.
+struct Fake {
+    stop: Arc<AtomicBool>,
+    paused: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+    slave_path: String,
+}
+
+impl Fake {
+    fn spawn(kind: Kind) -> Fake {
+        let (mut master, slave) = TTYPort::pair().expect("pseudo-terminal pair");
+        let slave_path = slave.name().expect("slave name");
+        master
+            .set_timeout(Duration::from_millis(2))
+            .expect("timeout");
+        let stop = Arc::new(AtomicBool::new(false));
+        let paused = Arc::new(AtomicBool::new(false));
+        let (s, p) = (Arc::clone(&stop), Arc::clone(&paused));
+        let handle = std::thread::spawn(move || {
+            // Keep our slave end open so the master never reads EIO before the hub opens it.
+            let _slave = slave;
+            run_fake(kind, &mut master, &s, &p);
+        });
+        Fake {
+            stop,
+            paused,
+            handle: Some(handle),
+            slave_path,
+        }
+    }
+
+    /// Unplugs the device: closes both ends of the pseudo-terminal.
+    fn unplug(mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            h.join().expect("fake device thread");
+        }
+    }
+}
+
+impl Drop for Fake {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+fn head_pose() -> Pose {
+    Pose::new(Vec3::new(0.1, 0.2, 0.3), Quat::from_rotation_y(0.5))
+}
+
+fn wand_pose() -> Pose {
+    Pose::new(Vec3::new(-0.2, 0.05, 0.25), Quat::from_rotation_x(0.3))
+}
+
+fn write_fragmented(port: &mut TTYPort, bytes: &[u8], tick: u64) {
+    // Split at a point that moves with the tick, so packets straddle reads.
+    let cut = if bytes.len() > 1 {
+        1 + (tick as usize * 7) % (bytes.len() - 1)
+    } else {
+        bytes.len()
+    };
+    for (i, part) in [&bytes[..cut], &bytes[cut..]].into_iter().enumerate() {
+        if part.is_empty() {
+            continue;
+        }
+        if port.write_all(part).is_err() {
+            return;
+        }
+        let _ = port.flush();
+        if i == 0 {
+            std::thread::sleep(Duration::from_micros(700));
+        }
+    }
+}
+
+fn run_fake(kind: Kind, master: &mut TTYPort, stop: &AtomicBool, paused: &AtomicBool) {
+    let mut pending = Vec::new();
+    let mut buf = [0u8; 256];
+    let mut streaming = false;
+    let mut fastrak = FastrakSettings::default();
+    let mut format = FastrakFormat::Ascii;
+    let mut stations: Vec<u8> = Vec::new();
+    let mut tick = 0u64;
+    let mut last_sent = Instant::now();
+    while !stop.load(Ordering::SeqCst) {
+        match master.read(&mut buf) {
+            Ok(n) => pending.extend_from_slice(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+            Err(_) => std::thread::sleep(Duration::from_millis(2)),
+        }
+        while let Some(end) = pending.iter().position(|&b| b == b'\r') {
+            let cmd: Vec<u8> = pending.drain(..=end).collect();
+            let cmd = String::from_utf8_lossy(&cmd[..cmd.len() - 1]).to_string();
+            let reply: Vec<u8> = match (kind, cmd.as_str()) {
+                (Kind::Spaceball(_), "@RESET") => encode::spaceball::encode_banner("2.43"),
+                (Kind::Spaceball(_), "M") => {
+                    streaming = true;
+                    Vec::new()
+                }
+                (Kind::Fastrak, "c") => {
+                    streaming = false;
+                    Vec::new()
+                }
+                (Kind::Fastrak, "C") => {
+                    streaming = true;
+                    Vec::new()
+                }
+                (Kind::Fastrak, "F") => {
+                    format = FastrakFormat::Ascii;
+                    Vec::new()
+                }
+                (Kind::Fastrak, "f") => {
+                    format = FastrakFormat::Binary;
+                    Vec::new()
+                }
+                (Kind::Fastrak, "U") => {
+                    fastrak.units = LengthUnit::Inches;
+                    Vec::new()
+                }
+                (Kind::Fastrak, "u") => {
+                    fastrak.units = LengthUnit::Centimetres;
+                    Vec::new()
+                }
+                (Kind::Fastrak, "S") => encode::fastrak::encode_status_record(1, "fake FASTRAK"),
+                (Kind::Fastrak, c) if c.starts_with('O') => {
+                    fastrak.items = c[3..]
+                        .split(',')
+                        .filter_map(|s| s.trim().parse().ok())
+                        .collect();
+                    Vec::new()
+                }
+                (Kind::Fastrak, c) if c.starts_with('l') => {
+                    if let Some(st) = c[1..2].parse().ok() {
+                        stations.push(st);
+                    }
+                    Vec::new()
+                }
+                _ => Vec::new(),
+            };
+            if !reply.is_empty() {
+                write_fragmented(master, &reply, tick);
+            }
+        }
+        if streaming
+            && !paused.load(Ordering::SeqCst)
+            && last_sent.elapsed() >= Duration::from_millis(4)
+        {
+            last_sent = Instant::now();
+            tick += 1;
+            let packet = match kind {
+                Kind::Spaceball(axes) => encode::spaceball::encode_d(64, axes),
+                Kind::Fastrak => {
+                    let st = if stations.is_empty() {
+                        1
+                    } else {
+                        stations[tick as usize % stations.len()]
+                    };
+                    let pose = if st == 1 { head_pose() } else { wand_pose() };
+                    let rec =
+                        encode::fastrak::FastrakRecord::from_pose(st, &pose, fastrak.units, false);
+                    encode::fastrak::encode_record(format, &fastrak, &rec)
+                }
+            };
+            write_fragmented(master, &packet, tick);
+        }
+    }
+}
+
+fn swap_symlink(link: &Path, target: &str) {
+    let tmp = link.with_extension("new");
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(target, &tmp).expect("symlink");
+    std::fs::rename(&tmp, link).expect("swap symlink");
+}
+
+fn expected_axes(raw: [i16; 6]) -> [f32; 6] {
+    let mut d = SpaceballDecoder::new();
+    let mut out = Vec::new();
+    d.feed(&encode::spaceball::encode_d(64, raw), &mut out);
+    match out.as_slice() {
+        [DeviceEvent::Axes(a)] => a.value,
+        other => panic!("decoder gave {other:?}"),
+    }
+}
+
+fn serial_profile(dir: &Path) -> Profile {
+    let text = format!(
+        r#"
+version = 1
+name = "pty"
+
+[[device]]
+name = "fastrak"
+protocol = "fastrak-ascii"
+transport = {{ kind = "serial", path = "{fastrak}" }}
+driver = {{ reconnect_min_s = 0.02, reconnect_max_s = 0.1, stale_after_s = 0.25, read_timeout_s = 0.01 }}
+
+[[device]]
+name = "spaceball"
+protocol = "spaceball"
+transport = {{ kind = "serial", path = "{ball}" }}
+driver = {{ reconnect_min_s = 0.02, reconnect_max_s = 0.1, stale_after_s = 0.25, read_timeout_s = 0.01 }}
+
+[[role]]
+role = "head"
+device = "fastrak"
+station = 1
+
+[[role]]
+role = "wand"
+device = "fastrak"
+station = 2
+
+[[role]]
+role = "navigation"
+device = "spaceball"
+input = "axes"
+"#,
+        fastrak = dir.join("fastrak").display(),
+        ball = dir.join("spaceball").display(),
+    );
+    Profile::parse(&text, Path::new("pty.toml")).expect("profile")
+}
+
+fn per_device(events: &[TimedEvent], device: usize) -> Vec<TimedEvent> {
+    events
+        .iter()
+        .filter(|e| e.device == device)
+        .cloned()
+        .collect()
+}
+
+#[test]
+fn fake_spaceball_and_fastrak_on_ptys_survive_unplug_and_stall() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let axes_a = [1000, -2000, 3000, -400, 500, -600];
+    let axes_b = [-5000, 0, 0, 0, 0, 7000];
+    let fastrak = Fake::spawn(Kind::Fastrak);
+    let ball = Fake::spawn(Kind::Spaceball(axes_a));
+    swap_symlink(&dir.path().join("fastrak"), &fastrak.slave_path);
+    swap_symlink(&dir.path().join("spaceball"), &ball.slave_path);
+    let session_path = dir.path().join("live.session");
+    let hub = Hub::start(
+        serial_profile(dir.path()),
+        Arc::new(RealClock::new()),
+        HubOptions {
+            record_to: Some(session_path.clone()),
+        },
+    )
+    .expect("hub");
+    let mut live_events = Vec::new();
+
+    // Both devices initialise (banner, status record) and stream through the hub.
+    let snap = wait_until(&hub, "both devices running with data", |s| {
+        s.devices
+            .iter()
+            .all(|d| d.state == DeviceState::Running && d.samples > 5)
+            && Role::ALL.iter().all(|r| s.role(*r).at.is_some())
+    });
+    live_events.extend(hub.drain_events());
+    let head = snap.role(Role::Head).pose.expect("head pose");
+    let wand = snap.role(Role::Wand).pose.expect("wand pose");
+    assert!(
+        head.position_m.distance(head_pose().position_m) < 0.001,
+        "{head:?}"
+    );
+    assert!(head.orientation.angle_between(head_pose().orientation) < 0.01);
+    assert!(
+        wand.position_m.distance(wand_pose().position_m) < 0.001,
+        "{wand:?}"
+    );
+    assert!(wand.orientation.angle_between(wand_pose().orientation) < 0.01);
+    assert_eq!(snap.role(Role::Navigation).axes, expected_axes(axes_a));
+    assert_eq!(
+        snap.devices[1].model.as_deref().map(|m| m.contains("4000")),
+        Some(true)
+    );
+    assert_eq!(
+        snap.devices[0].dropped_bytes, 0,
+        "clean stream, fragmented reads"
+    );
+
+    // Unplug the Spaceball: it is reported lost, its axes read zero, the FASTRAK carries on.
+    ball.unplug();
+    let snap = wait_until(&hub, "spaceball lost", |s| {
+        s.devices[1].state == DeviceState::Lost
+    });
+    assert_eq!(snap.role(Role::Navigation).axes, [0.0; 6]);
+    assert!(snap.devices[1].last_error.is_some());
+    let head_samples = snap.devices[0].samples;
+    wait_until(&hub, "fastrak still streaming", |s| {
+        s.devices[0].state == DeviceState::Running && s.devices[0].samples > head_samples + 10
+    });
+    live_events.extend(hub.drain_events());
+
+    // Plug a Spaceball in again (a new pty behind the same path): the hub reopens it, reruns
+    // the initialisation and reads the new device, without restarting anything.
+    let ball2 = Fake::spawn(Kind::Spaceball(axes_b));
+    swap_symlink(&dir.path().join("spaceball"), &ball2.slave_path);
+    let snap = wait_until(&hub, "spaceball back", |s| {
+        s.devices[1].state == DeviceState::Running
+            && s.role(Role::Navigation).axes == expected_axes(axes_b)
+    });
+    assert!(snap.devices[1].reconnects >= 1);
+    live_events.extend(hub.drain_events());
+
+    // A stalled FASTRAK (open, silent) goes stale, the head keeps its last good pose, and
+    // recovers when data flows again.
+    fastrak.paused.store(true, Ordering::SeqCst);
+    let snap = wait_until(&hub, "fastrak stale", |s| {
+        s.devices[0].state == DeviceState::Stale
+    });
+    assert!(snap.role(Role::Head).pose.is_some());
+    fastrak.paused.store(false, Ordering::SeqCst);
+    wait_until(&hub, "fastrak running again", |s| {
+        s.devices[0].state == DeviceState::Running
+    });
+    live_events.extend(hub.drain_events());
+
+    let path = hub.stop().expect("stop").expect("recorded");
+    drop((fastrak, ball2));
+    let session = Session::load(&path).expect("load the recording");
+    let opened_ball = session
+        .records
+        .iter()
+        .filter(|r| matches!(r, Record::Opened { device: 1, .. }))
+        .count();
+    assert!(opened_ball >= 2, "opened, lost, reopened");
+    assert!(
+        session
+            .records
+            .iter()
+            .any(|r| matches!(r, Record::Lost { device: 1, .. }))
+    );
+    assert!(session.records.iter().any(
+        |r| matches!(r, Record::Sent { device: 1, bytes, .. } if bytes.as_slice() == b"\r@RESET\r")
+    ));
+
+    // The recording replays into exactly the same events at the same times, per device.
+    let mut replayer = Replayer::new(session).expect("replayer");
+    replayer.run_to_end();
+    let replayed = replayer.drain_events();
+    for device in 0..2 {
+        let live = per_device(&live_events, device);
+        let again = per_device(&replayed, device);
+        assert!(live.len() > 10);
+        // Events after the last drain reached the file but not `live`: compare the prefix.
+        assert!(again.len() >= live.len());
+        assert_eq!(
+            live,
+            again[..live.len()],
+            "device {device}: replay differs from live"
+        );
+    }
+}
+
+/// An opener binding a real UDP socket on 127.0.0.1 (ephemeral port) and reporting its address.
+fn loopback_opener(tx: mpsc::Sender<std::net::SocketAddr>) -> Box<dyn Opener> {
+    Box::new(FnOpener::new("udp loopback", move || {
+        let t = UdpTransport::bind("127.0.0.1:0", Duration::from_millis(10))?;
+        if let Some(a) = t.local_addr() {
+            let _ = tx.send(a);
+        }
+        Ok(Box::new(t) as Box<dyn Transport>)
+    }))
+}
+
+fn opentrack_profile(bind: &str) -> Profile {
+    Profile::parse(
+        &format!(
+            r#"
+version = 1
+name = "ot"
+[[device]]
+name = "opentrack"
+protocol = "opentrack"
+transport = {{ kind = "udp", bind = "{bind}" }}
+[[role]]
+role = "head"
+device = "opentrack"
+map.z = {{ offset = 0.6 }}
+"#
+        ),
+        Path::new("ot.toml"),
+    )
+    .expect("profile")
+}
+
+#[test]
+fn opentrack_over_loopback_udp() {
+    let (tx, rx) = mpsc::channel();
+    let hub = Hub::start_with(
+        opentrack_profile("127.0.0.1:0"),
+        vec![Some(loopback_opener(tx))],
+        Arc::new(RealClock::new()),
+        HubOptions::default(),
+    )
+    .expect("hub");
+    let addr = rx.recv_timeout(WAIT).expect("socket bound");
+    let client = std::net::UdpSocket::bind("127.0.0.1:0").expect("client");
+    // x, y, z in cm; yaw, pitch, roll in degrees.
+    let good = encode::opentrack::datagram([10.0, -5.0, 2.0, 30.0, 0.0, 0.0]);
+    let snap = {
+        let start = Instant::now();
+        loop {
+            client.send_to(&good, addr).expect("send");
+            let s = hub.snapshot();
+            if s.role(Role::Head).pose.is_some() {
+                break s;
+            }
+            assert!(start.elapsed() < WAIT, "no pose from UDP");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    };
+    let pose = snap.role(Role::Head).pose.expect("pose");
+    // The profile's offset puts OpenTrack's centre 0.6 m in front of the screen.
+    assert!(
+        pose.position_m.distance(Vec3::new(0.10, -0.05, 0.62)) < 1e-5,
+        "{pose:?}"
+    );
+    assert!((pose.orientation.angle_between(Quat::IDENTITY) - 30f32.to_radians()).abs() < 1e-4);
+
+    // A short datagram and a NaN datagram are dropped loudly; the head keeps its last good pose.
+    let dropped_before = snap.devices[0].dropped_bytes;
+    client.send_to(&good[..20], addr).expect("send short");
+    let nan = encode::opentrack::datagram([f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    client.send_to(&nan, addr).expect("send nan");
+    let snap = wait_until(&hub, "both bad datagrams dropped", |s| {
+        s.devices[0].dropped_bytes >= dropped_before + 20 + 48
+    });
+    assert_eq!(snap.role(Role::Head).pose, Some(pose));
+    assert!(hub.stop().expect("stop").is_none());
+}
+
+fn leman() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_leman"))
+}
+
+#[test]
+fn record_command_writes_a_session_of_live_udp_datagrams() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Find a free loopback port for the recorder to bind.
+    let port = {
+        let probe = std::net::UdpSocket::bind("127.0.0.1:0").expect("probe");
+        probe.local_addr().expect("addr").port()
+    };
+    let profile_path = dir.path().join("ot.toml");
+    std::fs::write(
+        &profile_path,
+        opentrack_profile(&format!("127.0.0.1:{port}"))
+            .to_toml()
+            .expect("toml"),
+    )
+    .expect("write profile");
+    let out = dir.path().join("rec.session");
+    let mut child = leman()
+        .args(["record", "--profile"])
+        .arg(&profile_path)
+        .arg("--out")
+        .arg(&out)
+        .args(["--seconds", "1.5", "--status-every", "0"])
+        .spawn()
+        .expect("spawn leman record");
+    let client = std::net::UdpSocket::bind("127.0.0.1:0").expect("client");
+    let start = Instant::now();
+    let mut sent = 0;
+    while start.elapsed() < Duration::from_millis(1200) {
+        let d = encode::opentrack::datagram([f64::from(sent), 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let _ = client.send_to(&d, ("127.0.0.1", port));
+        sent += 1;
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let status = child.wait().expect("wait");
+    assert!(status.success(), "leman record failed");
+    let session = Session::load(&out).expect("load recorded session");
+    let chunks: Vec<_> = session.chunks(0).collect();
+    assert!(
+        chunks.len() > 20,
+        "{} datagrams recorded of {sent}",
+        chunks.len()
+    );
+    assert!(
+        chunks.iter().all(|(_, b)| b.len() == 48),
+        "one datagram per chunk"
+    );
+    assert!(
+        chunks.windows(2).all(|w| w[0].0 <= w[1].0),
+        "times never decrease"
+    );
+    // The datagrams are the ones sent, in order (x counts up).
+    let xs: Vec<f64> = chunks
+        .iter()
+        .map(|(_, b)| f64::from_le_bytes(b[..8].try_into().expect("8 bytes")))
+        .collect();
+    assert!(xs.windows(2).all(|w| w[1] > w[0]), "{xs:?}");
+    let leftovers: Vec<PathBuf> = std::fs::read_dir(dir.path())
+        .expect("list")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.to_string_lossy().contains("partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn record_command_names_the_profile_file_and_field_on_errors() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "version = 1\nname = \"x\"\n[[device]]\nname = \"d\"\nprotocol = \"desktop\"\n[[role]]\nrole = \"head\"\ndevice = \"nope\"\n",
+    )
+    .expect("write");
+    let out = leman()
+        .args(["record", "--profile"])
+        .arg(&bad)
+        .args(["--out"])
+        .arg(dir.path().join("x.session"))
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.toml") && err.contains("role[0].device"),
+        "{err}"
+    );
+}
+
+#[test]
+fn devices_command_lists_as_json() {
+    let out = leman().args(["devices", "--json"]).output().expect("run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert!(
+        v["serial"].is_array() && v["hid"].is_array() && v["notes"].is_array(),
+        "{v}"
+    );
+    let text = leman().arg("devices").output().expect("run");
+    assert!(String::from_utf8_lossy(&text.stdout).contains("Serial ports:"));
+}
