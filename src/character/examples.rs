@@ -288,7 +288,7 @@ fn penguin() -> Body {
     let head = b.joint(
         "head",
         Some(chest),
-        Vec3::new(0.0, 0.2, 0.0),
+        Vec3::new(0.0, 0.18, 0.0),
         &[dof(Vec3::Y, -60.0, 60.0), dof(Vec3::X, -30.0, 30.0)],
     );
     let left = b.joint(
@@ -374,7 +374,7 @@ fn penguin() -> Body {
             bottom_joint: pelvis,
             top_joint: head,
             start_m: Vec3::new(0.0, 0.0, 0.0),
-            end_m: Vec3::new(0.0, 0.655, 0.0),
+            end_m: Vec3::new(0.0, 0.635, 0.0),
             zero_dir: Vec3::X,
             radius: Radius::Wrap {
                 end_radius_m: Some(0.012),
@@ -853,7 +853,7 @@ fn torso() -> Body {
             bottom_joint: pelvis,
             top_joint: neck,
             start_m: Vec3::new(0.0, 0.9, 0.0),
-            end_m: Vec3::new(0.0, 1.34, -0.01),
+            end_m: Vec3::new(0.0, 1.5, -0.01),
             zero_dir: Vec3::X,
             radius: Radius::Wrap { end_radius_m: None },
             fat_m: |s, angle| 0.008 + 0.008 * (1.0 - s) * (0.5 + 0.5 * angle.sin()),

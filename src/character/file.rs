@@ -410,3 +410,144 @@ fn write_ints(out: &mut String, key: &str, values: &[u32]) {
     }
     out.push_str("]\n");
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn arm_text() -> String {
+        super::super::examples::build("arm", 8, 6)
+            .expect("arm")
+            .to_toml_string()
+    }
+
+    /// Loads `text` from a file in a temporary folder and returns the error message.
+    fn load_error(text: &str) -> String {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("broken_character.toml");
+        std::fs::write(&path, text).expect("write");
+        let err = Character::load(&path).expect_err("must be rejected");
+        let message = err.to_string();
+        assert!(
+            message.contains("broken_character.toml"),
+            "names the file: {message}"
+        );
+        message
+    }
+
+    #[test]
+    fn save_then_load_is_exact_and_atomic() {
+        let c = super::super::examples::build("wombat", 8, 6).expect("wombat");
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("w.toml");
+        c.save(&path).expect("save");
+        assert_eq!(Character::load(&path).expect("load"), c);
+        // Overwriting leaves exactly one file (the temporary is renamed away).
+        c.save(&path).expect("save again");
+        assert_eq!(std::fs::read_dir(dir.path()).expect("list").count(), 1);
+        // An invalid character is refused and the old file is untouched.
+        let mut bad = c.clone();
+        bad.skin.mass_kg[3] = -1.0;
+        let before = std::fs::read(&path).expect("read");
+        let err = bad.save(&path).expect_err("invalid");
+        assert!(err.to_string().contains("mass_kg[3]"), "{err}");
+        assert_eq!(std::fs::read(&path).expect("read"), before);
+    }
+
+    #[test]
+    fn missing_file_names_it() {
+        let err = Character::load(Path::new("/no/such/dir/ghost.toml")).expect_err("missing");
+        assert!(err.to_string().contains("ghost.toml"));
+    }
+
+    #[test]
+    fn unknown_or_missing_version_is_rejected() {
+        let text = arm_text().replace("format_version = 1", "format_version = 7");
+        let m = load_error(&text);
+        assert!(m.contains("unknown format_version 7"), "{m}");
+        let text = arm_text().replace("format_version = 1\n", "");
+        let m = load_error(&text);
+        assert!(m.contains("format_version is missing"), "{m}");
+    }
+
+    #[test]
+    fn syntax_and_unknown_fields_are_rejected() {
+        let m = load_error("format_version = 1\nname = \"x\"\n[skin\n");
+        assert!(m.contains("line"), "{m}");
+        let text = arm_text().replace("radius_m = 0.06", "radius_m = 0.06\nradius_cm = 6.0");
+        let m = load_error(&text);
+        assert!(m.contains("radius_cm"), "{m}");
+    }
+
+    #[test]
+    fn bad_joint_reference_is_named() {
+        let text = arm_text().replace("name = \"elbow\"\njoint = 1", "name = \"elbow\"\njoint = 9");
+        let m = load_error(&text);
+        assert!(
+            m.contains("shape 2 \"elbow\": joint 9 does not exist"),
+            "{m}"
+        );
+        let text = arm_text().replace("parent = 1", "parent = 2");
+        let m = load_error(&text);
+        assert!(
+            m.contains("joint 2 \"wrist\": parent 2 must be an earlier joint"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn negative_radius_is_named() {
+        let text = arm_text().replace("radius_m = 0.06", "radius_m = -0.06");
+        let m = load_error(&text);
+        assert!(
+            m.contains("shape 2 \"elbow\": radius_m must be > 0, got -0.06"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn wrong_per_point_length_is_named() {
+        let text = arm_text();
+        // Drop the last line of the fat array by giving a short explicit list instead.
+        let start = text.find("fat_m = ").expect("fat");
+        let end = start + text[start..].find('\n').expect("eol");
+        let text = format!("{}fat_m = [0.01, 0.02]{}", &text[..start], &text[end..]);
+        let m = load_error(&text);
+        assert!(m.contains("skin: fat_m has 2 values, expected 48"), "{m}");
+    }
+
+    #[test]
+    fn nan_is_named() {
+        let text = arm_text().replace("radius_m = 0.06", "radius_m = nan");
+        let m = load_error(&text);
+        assert!(m.contains("radius_m must be > 0, got NaN"), "{m}");
+        let text = arm_text().replace("time_s = 1.0", "time_s = nan");
+        let m = load_error(&text);
+        assert!(
+            m.contains("motion \"bend\": key 1 time is not finite"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn bad_spring_reference_is_named() {
+        let text = arm_text();
+        let start = text.find("[tissue]").expect("tissue");
+        let shape_at = start + text[start..].find("shape = ").expect("shape");
+        let end = shape_at + text[shape_at..].find("\nanchor_rest_m").expect("anchor");
+        let text = format!("{}shape = 42{}", &text[..shape_at], &text[end..]);
+        let m = load_error(&text);
+        assert!(
+            m.contains("tissue spring 0: shape 42 does not exist"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn fixed_rows_must_match_their_joints() {
+        let mut c = super::super::examples::build("arm", 8, 6).expect("arm");
+        c.skin.bottom_ring_m[0].x += 0.1;
+        let err = c.validate().expect_err("moved ring");
+        assert!(err.0.contains("fixed point (0, 0)"), "{err}");
+    }
+}

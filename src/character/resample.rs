@@ -221,3 +221,57 @@ impl Character {
         Ok(resampled)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::examples::build;
+    use super::*;
+
+    #[test]
+    fn coincident_points_keep_their_values() {
+        let c = build("wombat", 16, 16).expect("wombat");
+        // 16 -> 32 around (every other point coincides), 16 -> 31 along (every other row).
+        let r = c.with_resolution(32, 31).expect("resample");
+        assert_eq!(r.skin.point_count(), 32 * 31);
+        let scale = (16.0 * 16.0) / (32.0 * 31.0);
+        for j in 0..16 {
+            for i in 0..16 {
+                let old = c.skin.index(i, j);
+                let new = r.skin.index(2 * i, 2 * j);
+                assert!((r.skin.positions_m[new] - c.skin.positions_m[old]).length() < 1e-6);
+                assert_eq!(r.skin.fat_m[new], c.skin.fat_m[old]);
+                assert_eq!(r.skin.rest_metric[new], c.skin.rest_metric[old]);
+                assert_eq!(r.skin.stretch[new], c.skin.stretch[old]);
+                assert!((r.skin.mass_kg[new] - c.skin.mass_kg[old] * scale).abs() < 1e-9);
+                let old_spring = c.tissue.iter().find(|s| s.skin_point as usize == old);
+                let new_spring = r.tissue.iter().find(|s| s.skin_point as usize == new);
+                let (o, n) = (old_spring.expect("old"), new_spring.expect("new"));
+                assert_eq!(
+                    (o.shape, o.anchor_rest_m, o.rest_length_m),
+                    (n.shape, n.anchor_rest_m, n.rest_length_m)
+                );
+                assert!((n.stiffness_n_per_m - o.stiffness_n_per_m * scale).abs() < 1e-6);
+            }
+        }
+        // Total mass is preserved; midpoints are interpolated.
+        let total = |c: &Character| c.skin.mass_kg.iter().sum::<f32>();
+        assert!((total(&r) - total(&c)).abs() < 1e-4);
+        let mid = r.skin.positions_m[r.skin.index(1, 2)];
+        let expect =
+            0.5 * (c.skin.positions_m[c.skin.index(0, 1)] + c.skin.positions_m[c.skin.index(1, 1)]);
+        assert!((mid - expect).length() < 1e-6);
+        assert_eq!(
+            r.tissue.len(),
+            r.skin.point_count(),
+            "every point keeps a spring"
+        );
+    }
+
+    #[test]
+    fn upsampling_to_64_validates_and_rejects_tiny_grids() {
+        let c = build("torso", 16, 16).expect("torso");
+        let r = c.with_resolution(64, 64).expect("64x64");
+        r.validate().expect("valid");
+        assert!(c.with_resolution(2, 16).is_err());
+    }
+}

@@ -61,7 +61,7 @@ pub const SUPERELLIPSOID_EXPONENT_RANGE: (f32, f32) = (0.1, 2.0);
 
 /// An undeformed solid in the shape's rest space, centred on the origin.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Primitive {
     /// A sphere of radius `radius_m`.
     Sphere {
@@ -101,7 +101,7 @@ pub struct ParamKey {
 
 /// A deformation parameter: constant, keyed over simulation time, or tied to a joint angle.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Param {
     /// A fixed value.
     Constant {
@@ -196,7 +196,7 @@ fn keyed_value(keys: &[ParamKey], time_s: f32) -> f32 {
 
 /// One of Barr's global deformations, acting about the shape's +Y axis.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Deformation {
     /// Scales x and z by `r(y) = 1 + rate_per_m · y` (clamped to [`MIN_TAPER_SCALE`]).
     Taper {

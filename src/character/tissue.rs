@@ -197,3 +197,56 @@ pub fn attach_global(character: &super::Character, params: &AttachParams) -> Vec
     }
     springs
 }
+
+#[cfg(test)]
+mod attach_tests {
+    use super::*;
+    use crate::character::examples::build;
+    use crate::character::{PROJECTION_TOLERANCE_M, Posture};
+
+    #[test]
+    fn attach_gives_one_spring_per_point_to_a_surface_point_below_it() {
+        for name in ["penguin", "torso", "arm"] {
+            let c = build(name, 16, 16).expect("example");
+            let params = AttachParams {
+                stiffness_n_per_m: 3.0,
+                damping_n_s_per_m: 0.1,
+                rest_length_scale: 1.0,
+                max_ray_m: 0.3,
+            };
+            let springs = attach_global(&c, &params);
+            assert_eq!(springs.len(), c.skin.point_count(), "{name}");
+            let posture = Posture::neutral(&c.skeleton);
+            let pose = c.skeleton.forward_kinematics(&posture);
+            let mut instances = Vec::new();
+            c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
+            let mut normals = Vec::new();
+            c.skin.outward_normals(&c.skin.positions_m, &mut normals);
+            let mut below = 0;
+            for (k, s) in springs.iter().enumerate() {
+                assert_eq!(s.skin_point as usize, k);
+                let inst = &instances[s.shape.index()];
+                let anchor = inst.rest_point_to_world(s.anchor_rest_m);
+                let d = inst
+                    .geometry
+                    .distance_estimate_m(inst.to_shape(anchor))
+                    .abs();
+                assert!(
+                    d < 10.0 * PROJECTION_TOLERANCE_M,
+                    "{name} {k}: anchor off surface by {d}"
+                );
+                let l = c.skin.positions_m[k] - anchor;
+                assert!((l.length() - s.rest_length_m).abs() < 1e-4);
+                if l.normalize_or_zero().dot(normals[k]) > 0.7 {
+                    below += 1;
+                }
+            }
+            // Most anchors lie along the inward normal (the paper's "attach").
+            assert!(
+                below * 10 >= springs.len() * 7,
+                "{name}: only {below} along the normal"
+            );
+            assert_eq!(springs[0].stiffness_n_per_m, 3.0);
+        }
+    }
+}
