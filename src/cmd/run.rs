@@ -1,10 +1,158 @@
-//! `leman run`.
+//! `leman run` (and plain `leman`): opens the workstation window on the default character with
+//! the default calibration and the devices of a profile (the desktop mouse and keyboard when no
+//! profile is given).
+
+use anyhow::Context;
+use leman::app::scheduler::{Pacing, Scheduler, SchedulerConfig};
+use leman::app::setup;
+use leman::app::state::AppState;
+use leman::calibration::CalibrationProfile;
+use leman::character::Character;
+use leman::clock::{RealClock, VirtualClock};
+use leman::devices::hub::{Hub, HubOptions};
+use leman::devices::profile::Profile;
+use leman::devices::replay::{ClockedReplay, DeviceSource};
+use leman::devices::session::Session;
+use leman::sim::IntegratorKind;
+use leman::stereo::StereoMode;
+use leman::ui::window::WorkstationApp;
+use std::path::PathBuf;
+use std::sync::Arc;
 
 /// Arguments of `leman run`.
 #[derive(Debug, Default, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Character file (default: assets/characters/torso.toml).
+    #[arg(long)]
+    pub character: Option<PathBuf>,
+    /// Device profile (TOML); default: the desktop mouse and keyboard.
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
+    /// Calibration profile (default: the built-in desktop).
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// Stereo mode: mono, sbs, sbs-full, top-bottom, anaglyph, rows, sequential.
+    #[arg(long)]
+    pub stereo: Option<String>,
+    /// Simulated seconds per real second (1 = real time, lower = slow motion).
+    #[arg(long, default_value_t = 1.0)]
+    pub ratio: f64,
+    /// Close the window after this many frames (for tests and screenshots).
+    #[arg(long, hide = true)]
+    pub quit_after_frames: Option<u64>,
+    /// Window size, WIDTHxHEIGHT.
+    #[arg(long)]
+    pub size: Option<String>,
+}
+
+/// What the window needs.
+pub struct WindowSetup {
+    /// The character.
+    pub character: Character,
+    /// The calibration.
+    pub calibration: CalibrationProfile,
+    /// Stereo mode.
+    pub mode: StereoMode,
+    /// A session to replay instead of live devices.
+    pub replay: Option<Session>,
+    /// A device profile for live devices (desktop when none).
+    pub profile: Option<Profile>,
+    /// Sim/real ratio.
+    pub ratio: f64,
+}
 
 /// Runs `leman run`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("leman run is not built yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let character = setup::load_character(args.character.as_deref())?;
+    let calibration = setup::load_calibration(args.calibration.as_deref())?;
+    let mode = match &args.stereo {
+        Some(s) => setup::parse_stereo_mode(s)?,
+        None => StereoMode::Mono,
+    };
+    let profile = match &args.profile {
+        Some(p) => Some(Profile::load(p)?),
+        None => None,
+    };
+    let size = match &args.size {
+        Some(s) => setup::parse_size(s)?,
+        None => [1600, 900],
+    };
+    run_window_sized(
+        WindowSetup {
+            character,
+            calibration,
+            mode,
+            replay: None,
+            profile,
+            ratio: args.ratio,
+        },
+        size,
+        args.quit_after_frames,
+    )
+}
+
+/// Opens the window (used by `run` and `replay` without `--headless`).
+pub fn run_window(setup: WindowSetup) -> anyhow::Result<()> {
+    run_window_sized(setup, [1600, 900], None)
+}
+
+fn run_window_sized(
+    setup: WindowSetup,
+    size: [u32; 2],
+    quit_after_frames: Option<u64>,
+) -> anyhow::Result<()> {
+    let WindowSetup {
+        character,
+        calibration,
+        mode,
+        replay,
+        profile,
+        ratio,
+    } = setup;
+    let model = setup::surface_model(&character, IntegratorKind::Verlet);
+    if let Err(e) = &model {
+        eprintln!("warning: the skin will not be simulated: {e}");
+    }
+    // A replay in the window runs on its own clock, advanced in real time by the frames.
+    let (devices, replay_clock): (Box<dyn DeviceSource>, Option<VirtualClock>) = match replay {
+        Some(session) => {
+            let clock = VirtualClock::new();
+            let source = ClockedReplay::new(session, Arc::new(clock.clone()))?;
+            (Box::new(source), Some(clock))
+        }
+        None => {
+            let profile = profile.unwrap_or_else(Profile::desktop_default);
+            let hub = Hub::start(profile, Arc::new(RealClock::new()), HubOptions::default())
+                .context("starting the device hub")?;
+            (Box::new(hub), None)
+        }
+    };
+    let config = SchedulerConfig {
+        sim_per_real: ratio,
+        pacing: Pacing::Live,
+        ..SchedulerConfig::default()
+    };
+    let scheduler = Scheduler::new(config, 0.0)?;
+    let mut state = AppState::new(character, model, calibration, devices, scheduler);
+    state.output.mode = mode;
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("leman")
+            .with_inner_size([size[0] as f32, size[1] as f32]),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "leman",
+        options,
+        Box::new(move |cc| {
+            let mut app = WorkstationApp::new(cc, state);
+            app.quit_after_frames = quit_after_frames;
+            if let Some(clock) = replay_clock {
+                app.replay_clock = Some((clock, RealClock::new()));
+            }
+            Ok(Box::new(app))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("window: {e}"))?;
+    Ok(())
 }

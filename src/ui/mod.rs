@@ -1,1 +1,383 @@
-//! egui panels of the workstation.
+//! egui panels of the workstation. Each `*_ui` function draws one panel from the
+//! [`AppState`] and writes the user's changes back into it (parameter changes are queued and
+//! take effect between simulation steps, while the simulation runs).
+//!
+//! [`window`] holds the eframe application that lays the panels around the 3D view.
+
+pub mod window;
+
+use crate::app::state::{AppState, CharacterParams};
+use crate::devices::hub::DeviceState;
+use crate::devices::profile::Role;
+use crate::sim::{IntegratorKind, ParameterChange};
+use crate::stereo::StereoMode;
+
+/// The tool slots of the toolbar. Only navigation exists yet; the construction tools arrive
+/// with issue #6 and are shown disabled, saying so.
+pub const TOOL_SLOTS: [(&str, bool); 7] = [
+    ("Navigate", true),
+    ("Select", false),
+    ("Sphere", false),
+    ("Superellipse", false),
+    ("IK", false),
+    ("Attach skin", false),
+    ("Liposuction", false),
+];
+
+/// The toolbar: tool slots (only navigation works yet) and the simulation switch.
+pub fn toolbar_ui(ui: &mut egui::Ui, state: &mut AppState) {
+    ui.horizontal_wrapped(|ui| {
+        ui.label("Tools:");
+        for (name, available) in TOOL_SLOTS {
+            let button = egui::Button::selectable(available, name);
+            let response = ui.add_enabled(available, button);
+            if available {
+                response.on_hover_text(
+                    "Fly with the keyboard (W/S forward/back, A/D left/right, R/F up/down, \
+                     arrows pitch/yaw, Q/E roll) or a Spaceball; the mouse moves the wand.",
+                );
+            } else {
+                response.on_disabled_hover_text("Not built yet: the tools arrive in issue #6.");
+            }
+        }
+        ui.separator();
+        ui.toggle_value(&mut state.simulation_on, "Simulate");
+    });
+}
+
+/// Character parameters: skin elasticity, mass, damping, tissue stiffness and damping, fat.
+pub fn character_ui(ui: &mut egui::Ui, state: &mut AppState) {
+    let mut p: CharacterParams = state.params;
+    ui.label(format!("Character: {}", state.character.name));
+    let (around, along) = state.skin_grid();
+    ui.label(format!(
+        "Skin: {around} × {along} = {} points",
+        around * along
+    ));
+    egui::Grid::new("character_params")
+        .num_columns(2)
+        .show(ui, |ui| {
+            ui.label("Skin elasticity ×");
+            ui.add(egui::Slider::new(&mut p.elasticity_scale, 0.1..=10.0).logarithmic(true));
+            ui.end_row();
+            ui.label("Point mass (kg)");
+            ui.add(
+                egui::Slider::new(&mut p.point_mass_kg, 1e-4..=0.1)
+                    .logarithmic(true)
+                    .max_decimals(5),
+            );
+            ui.end_row();
+            ui.label("Point damping (N·s/m)");
+            ui.add(egui::Slider::new(&mut p.point_damping_n_s_per_m, 0.0..=1.0).max_decimals(4));
+            ui.end_row();
+            ui.label("Tissue stiffness (N/m)");
+            ui.add(egui::Slider::new(&mut p.tissue_stiffness_n_per_m, 0.0..=500.0).max_decimals(2));
+            ui.end_row();
+            ui.label("Tissue damping (N·s/m)");
+            ui.add(egui::Slider::new(&mut p.tissue_damping_n_s_per_m, 0.0..=5.0).max_decimals(3));
+            ui.end_row();
+            ui.label("Fat (m)");
+            ui.add(egui::Slider::new(&mut p.fat_m, 0.0..=0.05).max_decimals(4));
+            ui.end_row();
+        });
+    if p != state.params {
+        state.set_params(p);
+    }
+    ui.horizontal(|ui| {
+        ui.label("Motion:");
+        let names: Vec<String> = state
+            .character
+            .motions
+            .iter()
+            .map(|m| m.name.clone())
+            .collect();
+        let current = state
+            .motion
+            .and_then(|m| names.get(m).cloned())
+            .unwrap_or_else(|| "neutral posture".into());
+        egui::ComboBox::from_id_salt("motion")
+            .selected_text(current)
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut state.motion, None, "neutral posture");
+                for (k, name) in names.iter().enumerate() {
+                    ui.selectable_value(&mut state.motion, Some(k), name);
+                }
+            });
+    });
+    ui.label("Layers:");
+    ui.horizontal_wrapped(|ui| {
+        let l = &mut state.layers;
+        ui.checkbox(&mut l.skin, "skin");
+        ui.checkbox(&mut l.muscles, "muscles");
+        ui.checkbox(&mut l.bones, "bones");
+        ui.checkbox(&mut l.skeleton, "skeleton");
+        ui.checkbox(&mut l.springs, "tissue");
+        ui.checkbox(&mut l.fat, "fat");
+        ui.checkbox(&mut l.floor_grid, "floor");
+    });
+    ui.add(egui::Slider::new(&mut state.skin_opacity, 0.1..=1.0).text("skin opacity"));
+}
+
+/// The simulation: on/off, integrator, tolerances, sim/real ratio and adapt, and the live
+/// Table-1 figures.
+pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
+    ui.checkbox(&mut state.simulation_on, "Simulate the skin");
+    if let Some(e) = &state.sim_error {
+        ui.colored_label(egui::Color32::from_rgb(230, 120, 60), e);
+    }
+    let mut integrator = state.integrator;
+    egui::ComboBox::from_label("Integrator")
+        .selected_text(integrator_label(integrator))
+        .show_ui(ui, |ui| {
+            for k in IntegratorKind::ALL {
+                ui.selectable_value(&mut integrator, k, integrator_label(k));
+            }
+        });
+    if integrator != state.integrator {
+        state.integrator = integrator;
+        state.queue_change(ParameterChange::Integrator(integrator));
+    }
+    let mut t = state.tolerances;
+    let mut min_ms = t.min_step_s * 1e3;
+    let mut max_ms = t.max_step_s * 1e3;
+    let mut fixed_ms = t.fixed_step_s * 1e3;
+    egui::Grid::new("tolerances").num_columns(2).show(ui, |ui| {
+        ui.label("Position tolerance ε_r");
+        ui.add(
+            egui::Slider::new(&mut t.position_tolerance, 1e-6..=1e-2)
+                .logarithmic(true)
+                .max_decimals(6),
+        );
+        ui.end_row();
+        ui.label("Min step (ms)");
+        ui.add(egui::Slider::new(&mut min_ms, 0.01..=5.0).logarithmic(true));
+        ui.end_row();
+        ui.label("Max step (ms)");
+        ui.add(egui::Slider::new(&mut max_ms, 0.1..=40.0).logarithmic(true));
+        ui.end_row();
+        ui.label("Fixed step (ms)");
+        ui.add(egui::Slider::new(&mut fixed_ms, 0.05..=10.0).logarithmic(true));
+        ui.end_row();
+    });
+    t.min_step_s = min_ms * 1e-3;
+    t.max_step_s = (max_ms * 1e-3).max(t.min_step_s);
+    t.fixed_step_s = fixed_ms * 1e-3;
+    if t != state.tolerances {
+        state.tolerances = t;
+        state.queue_change(ParameterChange::Tolerances(t));
+    }
+    let mut eps_mm = state.epsilon_c_m * 1e3;
+    if ui
+        .add(egui::Slider::new(&mut eps_mm, 0.1..=20.0).text("constraint tolerance ε_c (mm)"))
+        .changed()
+    {
+        state.epsilon_c_m = eps_mm * 1e-3;
+        state.queue_change(ParameterChange::ConstraintTolerance(state.epsilon_c_m));
+    }
+
+    ui.separator();
+    let mut ratio = state.scheduler.config().sim_per_real;
+    if ui
+        .add(
+            egui::Slider::new(&mut ratio, 0.01..=1.0)
+                .logarithmic(true)
+                .text("sim / real time"),
+        )
+        .changed()
+    {
+        // A ratio from the slider is always positive and finite.
+        let _ = state.scheduler.set_sim_per_real(ratio);
+    }
+    let mut adapt = state.scheduler.config().adapt;
+    if ui
+        .checkbox(&mut adapt, "Adapt skin resolution to hold the ratio")
+        .changed()
+    {
+        state.scheduler.set_adapt(adapt);
+    }
+    if let Some(r) = &state.last_record {
+        let held = if r.ratio_held {
+            "held"
+        } else {
+            "NOT held: machine too slow"
+        };
+        ui.label(format!(
+            "ratio achieved {:.3} of {:.3} ({held}); skin {} points",
+            r.ratio_achieved, r.ratio_set, r.skin_points
+        ));
+        ui.label(format!(
+            "last frame: {} steps, sim {:.1} ms, render {:.1} ms, frame {:.1} ms, dropped {}",
+            r.sim_steps,
+            r.sim_wall_s * 1e3,
+            r.render_wall_s * 1e3,
+            r.frame_wall_s * 1e3,
+            r.dropped_frames
+        ));
+    }
+    ui.separator();
+    ui.label("Table 1 (live, since reset):");
+    let t1 = state.table1;
+    egui::Grid::new("table1").num_columns(2).show(ui, |ui| {
+        ui.label("Simulation slowdown");
+        ui.label(t1.slowdown().map_or("–".into(), |s| format!("{s:.2}×")));
+        ui.end_row();
+        ui.label("Timestep interval (ms)");
+        ui.label(
+            t1.step_interval_ms()
+                .map_or("–".into(), |(a, b)| format!("[{a:.2}–{b:.2}]")),
+        );
+        ui.end_row();
+        let (f, c, o) = t1.percent();
+        ui.label("% force evaluation");
+        ui.label(format!("{f:.1}"));
+        ui.end_row();
+        ui.label("% constraints");
+        ui.label(format!("{c:.1}"));
+        ui.end_row();
+        ui.label("% other");
+        ui.label(format!("{o:.1}"));
+        ui.end_row();
+        ui.label("Steps / rejected");
+        ui.label(format!(
+            "{} / {}",
+            t1.totals.steps, t1.totals.rejected_steps
+        ));
+        ui.end_row();
+    });
+    if ui.button("Reset figures").clicked() {
+        state.table1 = Default::default();
+    }
+}
+
+fn integrator_label(k: IntegratorKind) -> &'static str {
+    match k {
+        IntegratorKind::Euler => "Euler (fixed step)",
+        IntegratorKind::Verlet => "Leapfrog Verlet 2(1)",
+        IntegratorKind::Rk2 => "Runge-Kutta 2(1)",
+        IntegratorKind::Rk4 => "Runge-Kutta 4 (fixed step)",
+    }
+}
+
+/// Devices: each role's device, state, sample rate and the age of its newest sample.
+pub fn devices_ui(ui: &mut egui::Ui, state: &AppState) {
+    let Some(snapshot) = &state.last_snapshot else {
+        ui.label("no device snapshot yet");
+        return;
+    };
+    egui::Grid::new("devices")
+        .num_columns(5)
+        .striped(true)
+        .show(ui, |ui| {
+            ui.strong("role");
+            ui.strong("device");
+            ui.strong("state");
+            ui.strong("rate");
+            ui.strong("age");
+            ui.end_row();
+            for role in Role::ALL {
+                let sample = snapshot.role(role);
+                let device = sample.device.and_then(|d| snapshot.devices.get(d));
+                ui.label(role.name());
+                ui.label(device.map_or_else(
+                    || "none (default)".to_owned(),
+                    |d| format!("{} ({})", d.name, d.protocol),
+                ));
+                ui.label(state_label(device.map_or(sample.state, |d| d.state)));
+                ui.label(device.map_or("–".into(), |d| format!("{:.0} Hz", d.rate_hz)));
+                ui.label(sample.at.map_or("–".into(), |at| {
+                    format!(
+                        "{:.0} ms",
+                        snapshot.now.saturating_sub(at).as_secs_f64() * 1e3
+                    )
+                }));
+                ui.end_row();
+            }
+        });
+    if snapshot.role(Role::Head).pose.is_none() {
+        ui.label("No head pose: viewing from the calibrated position.");
+    }
+}
+
+fn state_label(s: DeviceState) -> &'static str {
+    match s {
+        DeviceState::Opening => "opening",
+        DeviceState::Running => "running",
+        DeviceState::Stale => "stale",
+        DeviceState::Lost => "lost",
+        DeviceState::Stopped => "stopped",
+    }
+}
+
+/// Calibration: the screen rectangle and the default viewing position (the corner-touching
+/// calibration tool arrives with the tools).
+pub fn calibration_ui(ui: &mut egui::Ui, state: &AppState) {
+    let c = &state.calibration;
+    ui.label(format!("Profile: {}", c.name));
+    ui.label(format!(
+        "Screen {:.3} × {:.3} m, centre {:.3?}, residual {:.1} mm",
+        c.screen.width_m(),
+        c.screen.height_m(),
+        c.screen.center_m().to_array(),
+        c.residual_m * 1e3
+    ));
+    ui.label(format!(
+        "Viewing position {:.3?} m; IPD {:.1} mm",
+        c.default_head.position_m.to_array(),
+        c.head_eyes.ipd_m * 1e3
+    ));
+}
+
+/// Stereo: output mode, eye swap and IPD.
+pub fn stereo_ui(ui: &mut egui::Ui, state: &mut AppState) {
+    let mut mode = state.output.mode;
+    egui::ComboBox::from_label("Stereo mode")
+        .selected_text(mode.label())
+        .show_ui(ui, |ui| {
+            for m in StereoMode::ALL {
+                ui.selectable_value(&mut mode, m, m.label());
+            }
+        });
+    state.output.mode = mode;
+    ui.checkbox(&mut state.output.swap_eyes, "Swap eyes");
+    let profile_ipd_mm = state.calibration.head_eyes.ipd_m * 1e3;
+    let mut ipd_mm = state
+        .view_settings
+        .ipd_override_m
+        .map_or(profile_ipd_mm, |v| v * 1e3);
+    if ui
+        .add(egui::Slider::new(&mut ipd_mm, 0.0..=80.0).text("IPD (mm)"))
+        .changed()
+    {
+        state.view_settings.ipd_override_m = Some(ipd_mm * 1e-3);
+    }
+    if let Some(v) = &state.last_views {
+        ui.label(format!(
+            "IPD used {:.1} mm{}",
+            v.ipd_used_m * 1e3,
+            if v.clamped {
+                " (eye clamped to the screen)"
+            } else {
+                ""
+            }
+        ));
+    }
+}
+
+/// Every panel, stacked (the side panel of the window).
+pub fn panels_ui(ui: &mut egui::Ui, state: &mut AppState) {
+    egui::CollapsingHeader::new("Character")
+        .default_open(true)
+        .show(ui, |ui| character_ui(ui, state));
+    egui::CollapsingHeader::new("Simulation")
+        .default_open(true)
+        .show(ui, |ui| simulation_ui(ui, state));
+    egui::CollapsingHeader::new("Devices")
+        .default_open(true)
+        .show(ui, |ui| devices_ui(ui, state));
+    egui::CollapsingHeader::new("Stereo")
+        .default_open(true)
+        .show(ui, |ui| stereo_ui(ui, state));
+    egui::CollapsingHeader::new("Calibration")
+        .default_open(false)
+        .show(ui, |ui| calibration_ui(ui, state));
+}
