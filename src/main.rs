@@ -40,7 +40,10 @@ fn main() -> anyhow::Result<()> {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
-    match cli.command.unwrap_or(Command::Run(cmd::run::Args::default())) {
+    match cli
+        .command
+        .unwrap_or(Command::Run(cmd::run::Args::default()))
+    {
         Command::Run(args) => cmd::run::run(args),
         Command::Devices(args) => cmd::devices::run(args),
         Command::Record(args) => cmd::record::run(args),
