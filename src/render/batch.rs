@@ -390,8 +390,9 @@ mod tests {
         };
         let g = FrameGeometry::build(&scene);
         assert!(g.all_finite());
+        assert_eq!(g.sanitized.non_finite_vertices, 2);
         assert_eq!(
-            g.sanitized.non_finite_vertices, 0,
+            g.sanitized.dropped_segments, 0,
             "springs layer is off by default"
         );
         let scene = Scene {

@@ -294,14 +294,22 @@ fn grid_indices(rows: u32, cols: u32) -> Vec<u32> {
     indices
 }
 
+/// `sign(x)·|x|^e`, with |x| below 1e-6 snapped to 0: `cos(π/2)` is −4e-8 in f32, and a small
+/// exponent would turn that into a visible, inside-out ring at the poles.
+fn signed_pow(x: f32, exponent: f32) -> f32 {
+    if x.abs() < 1e-6 {
+        0.0
+    } else {
+        x.signum() * x.abs().powf(exponent)
+    }
+}
+
 fn signed_cos_pow(angle: f32, exponent: f32) -> f32 {
-    let c = angle.cos();
-    c.signum() * c.abs().powf(exponent)
+    signed_pow(angle.cos(), exponent)
 }
 
 fn signed_sin_pow(angle: f32, exponent: f32) -> f32 {
-    let s = angle.sin();
-    s.signum() * s.abs().powf(exponent)
+    signed_pow(angle.sin(), exponent)
 }
 
 #[cfg(test)]
@@ -316,7 +324,11 @@ mod tests {
         for tri in mesh.indices.chunks_exact(3) {
             let p: Vec<Vec3> = tri.iter().map(|&i| mesh.positions[i as usize]).collect();
             let n = (p[1] - p[0]).cross(p[2] - p[0]);
-            if n.length() < 1e-9 {
+            let shortest = (p[1] - p[0])
+                .length()
+                .min((p[2] - p[1]).length())
+                .min((p[0] - p[2]).length());
+            if shortest < 1e-5 {
                 continue; // pole triangles are degenerate
             }
             let mid = (p[0] + p[1] + p[2]) / 3.0;

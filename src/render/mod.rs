@@ -6,6 +6,7 @@
 //! back and writes PNGs; [`device_caps`] is the one place that picks the adapter and backend.
 //! The renderer reaches into no simulation model and does no projection math.
 
+pub mod adapter;
 pub mod batch;
 pub mod capture;
 pub mod device_caps;
