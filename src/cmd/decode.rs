@@ -37,7 +37,8 @@ pub struct Args {
     #[arg(long, default_value_t = 2)]
     pub stylus_bytes: u8,
     /// Feed a raw stream capture in chunks of this many bytes (default: all at once) to
-    /// reproduce fragmented reads; decoded events do not depend on it.
+    /// reproduce fragmented reads; the output does not depend on it (consecutive drops are
+    /// merged into one `dropped` event).
     #[arg(long)]
     pub chunk: Option<usize>,
 }
@@ -64,16 +65,20 @@ impl<W: Write> Printer<W> {
     ) -> std::io::Result<()> {
         for e in events {
             if self.json {
+                let line = e.to_json_line();
                 match context {
-                    Some((t_s, device)) => {
-                        let mut v = e.to_json();
-                        if let serde_json::Value::Object(map) = &mut v {
-                            map.insert("t_s".into(), serde_json::json!(t_s));
-                            map.insert("device".into(), serde_json::json!(device));
-                        }
-                        writeln!(self.out, "{v}")?;
-                    }
-                    None => writeln!(self.out, "{}", e.to_json_line())?,
+                    // Session: `t_s` and `device` go right after `kind` (whose value has no
+                    // comma), so `kind` stays first.
+                    Some((t_s, device)) => match line.split_once(',') {
+                        Some((kind, rest)) => writeln!(
+                            self.out,
+                            "{kind},\"t_s\":{},\"device\":{},{rest}",
+                            serde_json::json!(t_s),
+                            serde_json::json!(device)
+                        )?,
+                        None => writeln!(self.out, "{line}")?,
+                    },
+                    None => writeln!(self.out, "{line}")?,
                 }
             } else {
                 match context {
@@ -88,8 +93,20 @@ impl<W: Write> Printer<W> {
     }
 }
 
-/// Runs `leman decode`.
+/// Runs `leman decode`. A closed output pipe (`| head`) ends it quietly.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    match decode(args) {
+        Err(e)
+            if e.downcast_ref::<std::io::Error>()
+                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe) =>
+        {
+            Ok(())
+        }
+        other => other,
+    }
+}
+
+fn decode(args: Args) -> anyhow::Result<()> {
     let bytes = std::fs::read(&args.file)
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     let stdout = std::io::stdout().lock();
@@ -151,8 +168,24 @@ fn decode_raw<W: Write>(args: &Args, bytes: &[u8], printer: &mut Printer<W>) -> 
             truncated_at_end(decoder.as_ref(), &mut events);
         }
     }
-    printer.print(&events, None)?;
+    printer.print(&merge_drops(events), None)?;
     Ok(())
+}
+
+/// Merges consecutive `Dropped` events (a decoder reports drops at the end of each read, so
+/// without this the output would depend on how the capture was chunked).
+fn merge_drops(events: Vec<DeviceEvent>) -> Vec<DeviceEvent> {
+    let mut out: Vec<DeviceEvent> = Vec::with_capacity(events.len());
+    for e in events {
+        if let (DeviceEvent::Dropped { bytes }, Some(DeviceEvent::Dropped { bytes: last })) =
+            (&e, out.last_mut())
+        {
+            *last += bytes;
+            continue;
+        }
+        out.push(e);
+    }
+    out
 }
 
 fn decode_session<W: Write>(
@@ -228,6 +261,24 @@ fn truncated_at_end(decoder: &dyn Decoder, events: &mut Vec<DeviceEvent>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn consecutive_drops_merge() {
+        let merged = merge_drops(vec![
+            DeviceEvent::Dropped { bytes: 1 },
+            DeviceEvent::Dropped { bytes: 2 },
+            DeviceEvent::Buttons { pressed: vec![] },
+            DeviceEvent::Dropped { bytes: 4 },
+        ]);
+        assert_eq!(
+            merged,
+            vec![
+                DeviceEvent::Dropped { bytes: 3 },
+                DeviceEvent::Buttons { pressed: vec![] },
+                DeviceEvent::Dropped { bytes: 4 },
+            ]
+        );
+    }
 
     #[test]
     fn default_args_match_the_clap_defaults() {
