@@ -2,10 +2,12 @@
 //! world, sensor to wand tip, head sensor to eyes) and calibration profiles (TOML files in
 //! `calibration/`).
 
+pub mod drive;
 pub mod fit;
 pub mod frames;
 pub mod procedure;
 pub mod profile;
+pub mod sample_session;
 pub mod screen;
 
 pub use fit::{FitError, FitOptions, ScreenFit, Units, fit_screen};

@@ -214,7 +214,12 @@ fn unit_quat(path: &Path, field: &str, a: [f32; 4]) -> Result<Quat, ProfileError
             format!("must be a unit quaternion [x, y, z, w], got {a:?}"),
         ));
     }
-    Ok(q.normalize())
+    // Renormalise only when needed, so a saved profile loads back bit for bit.
+    Ok(if (q.length() - 1.0).abs() > 1e-6 {
+        q.normalize()
+    } else {
+        q
+    })
 }
 
 fn invalid(path: &Path, field: &str, message: String) -> ProfileError {
@@ -308,7 +313,11 @@ impl CalibrationProfile {
                     "head.eye_midpoint_in_sensor_m",
                     f.head.eye_midpoint_in_sensor_m,
                 )?,
-                interocular_axis_in_sensor: axis.normalize(),
+                interocular_axis_in_sensor: if (axis.length() - 1.0).abs() > 1e-6 {
+                    axis.normalize()
+                } else {
+                    axis
+                },
                 ipd_m: f.head.ipd_m,
             },
             baseline: f.head.baseline,

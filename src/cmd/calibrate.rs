@@ -114,12 +114,22 @@ pub fn read_corners(path: &Path) -> anyhow::Result<leman::calibration::fit::Corn
     Ok(out)
 }
 
+/// An f32 as the JSON number with the same shortest decimal form (`0.265`, not
+/// `0.26499998569488525`); `null` if not finite.
+fn num(x: f32) -> Value {
+    x.to_string()
+        .parse::<f64>()
+        .ok()
+        .and_then(serde_json::Number::from_f64)
+        .map_or(Value::Null, Value::Number)
+}
+
 fn v3(v: Vec3) -> Value {
-    json!([v.x, v.y, v.z])
+    Value::Array(v.to_array().into_iter().map(num).collect())
 }
 
 fn m4(m: &Mat4) -> Value {
-    json!(m.to_cols_array())
+    Value::Array(m.to_cols_array().into_iter().map(num).collect())
 }
 
 fn screen_json(screen: &ScreenRect, residual_m: f32) -> Value {
@@ -127,23 +137,23 @@ fn screen_json(screen: &ScreenRect, residual_m: f32) -> Value {
         "lower_left": v3(screen.lower_left_m),
         "lower_right": v3(screen.lower_right_m),
         "upper_left": v3(screen.upper_left_m),
-        "width_m": screen.width_m(),
-        "height_m": screen.height_m(),
-        "residual_m": residual_m,
+        "width_m": num(screen.width_m()),
+        "height_m": num(screen.height_m()),
+        "residual_m": num(residual_m),
     })
 }
 
 fn fit_json(fit: &ScreenFit, out: Option<&Path>) -> Value {
     json!({
         "screen": screen_json(&fit.screen, fit.residual_m),
-        "non_planarity_m": fit.non_planarity_m,
-        "measured_angle_deg": fit.measured_angle_deg,
+        "non_planarity_m": num(fit.non_planarity_m),
+        "measured_angle_deg": num(fit.measured_angle_deg),
         "corners": fit.corners.iter().map(|c| json!({
             "corner": c.corner.name(),
             "measured_m": v3(c.measured_m),
             "kept": c.kept,
             "rejected": c.rejected,
-            "error_m": c.error_m,
+            "error_m": num(c.error_m),
         })).collect::<Vec<_>>(),
         "out": out.map(|p| p.display().to_string()),
     })

@@ -1,0 +1,84 @@
+//! Driving the corner procedure from the device hub's snapshots, live or from a recorded
+//! session, so the app, `leman calibrate` and the replay tests feed it the same way: each new
+//! wand sample (a new arrival time in the wand role) becomes one [`WandInput`], its pose taken
+//! through the profile's tracker frames (tracker to world, sensor to tip).
+
+use super::frames::TrackerFrames;
+use super::procedure::{CornerProcedure, ProcedureConfig, ProcedureEvent, Step, WandInput};
+use crate::devices::hub::{DeviceState, HubSnapshot};
+use crate::devices::profile::Role;
+use crate::devices::replay::{ReplayError, Replayer};
+use crate::devices::session::{Record, Session};
+use std::time::Duration;
+
+/// Turns successive hub snapshots into procedure inputs, each wand sample once.
+#[derive(Debug, Clone, Default)]
+pub struct SnapshotFeeder {
+    last_at: Option<Duration>,
+}
+
+impl SnapshotFeeder {
+    /// A feeder that has seen nothing.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Feeds the wand's newest sample in `snapshot` if it is new (and its device is not lost);
+    /// returns what the procedure made of it.
+    pub fn feed(
+        &mut self,
+        procedure: &mut CornerProcedure,
+        snapshot: &HubSnapshot,
+        frames: &TrackerFrames,
+    ) -> Option<ProcedureEvent> {
+        let wand = snapshot.role(Role::Wand);
+        let (Some(at), Some(pose)) = (wand.at, wand.pose) else {
+            return None;
+        };
+        if wand.state == DeviceState::Lost || self.last_at == Some(at) {
+            return None;
+        }
+        self.last_at = Some(at);
+        procedure.feed(WandInput {
+            time: at,
+            tip_world_m: frames.wand_tip_in_world_m(&pose),
+            button_down: !wand.pressed.is_empty(),
+        })
+    }
+}
+
+/// What a replayed procedure did.
+#[derive(Debug, Clone)]
+pub struct ReplayOutcome {
+    /// The procedure at the end (look at [`CornerProcedure::step`]).
+    pub procedure: CornerProcedure,
+    /// Every event with the session time of the sample that caused it.
+    pub events: Vec<(Duration, ProcedureEvent)>,
+}
+
+/// Runs the corner procedure over a recorded session until it is accepted or the session ends.
+pub fn run_on_session(
+    session: Session,
+    config: ProcedureConfig,
+    frames: &TrackerFrames,
+) -> Result<ReplayOutcome, ReplayError> {
+    let mut replayer = Replayer::new(session)?;
+    let mut procedure = CornerProcedure::new(config);
+    let mut feeder = SnapshotFeeder::new();
+    let mut events = Vec::new();
+    loop {
+        let at = match replayer.step() {
+            None => break,
+            Some(Record::Chunk { at, .. } | Record::Desktop { at, .. }) => *at,
+            Some(_) => continue,
+        };
+        let snapshot = replayer.snapshot(at);
+        if let Some(e) = feeder.feed(&mut procedure, &snapshot, frames) {
+            events.push((at, e));
+        }
+        if matches!(procedure.step(), Step::Done(_)) {
+            break;
+        }
+    }
+    Ok(ReplayOutcome { procedure, events })
+}
