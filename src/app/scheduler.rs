@@ -67,6 +67,12 @@ pub struct SchedulerConfig {
     pub raise_after_frames: u32,
     /// Fraction of the simulation budget the predicted cost at the higher level may use.
     pub raise_margin: f64,
+    /// Least share of a frame the simulation gets when rendering alone takes longer than a
+    /// frame period (live pacing): the frame is stretched to
+    /// `(work before the simulation + previous render) / (1 - min_sim_fraction)` so the skin
+    /// keeps moving on a slow machine instead of starving. 0 is the paper's rule exactly.
+    /// Clamped to [0, 0.9].
+    pub min_sim_fraction: f64,
 }
 
 impl Default for SchedulerConfig {
@@ -84,6 +90,7 @@ impl Default for SchedulerConfig {
             lower_after_frames: 8,
             raise_after_frames: 30,
             raise_margin: 0.75,
+            min_sim_fraction: 0.5,
         }
     }
 }
@@ -290,6 +297,9 @@ pub enum SchedulerError {
     /// The start level is out of range.
     #[error("start level {0} is out of range")]
     BadStartLevel(usize),
+    /// The least simulation share is not in [0, 0.9].
+    #[error("min_sim_fraction must be in [0, 0.9], got {0}")]
+    BadSimFraction(f64),
 }
 
 /// The frame scheduler's state.
@@ -442,8 +452,11 @@ impl Scheduler {
 
         // (3) simulation steps while time is left.
         let deforming = work.skin_deforming();
-        let deadline = start + period;
         let sim_start = clock.now();
+        let before_sim = sim_start.saturating_sub(start);
+        let share = self.config.min_sim_fraction.clamp(0.0, 0.9);
+        let stretched = (before_sim + self.previous_render).div_f64(1.0 - share);
+        let deadline = start + period.max(stretched);
         let mut budget_at_sim_start = Duration::ZERO;
         let mut steps = 0u32;
         let mut rejected = 0u32;
@@ -640,6 +653,9 @@ fn validate(config: &SchedulerConfig) -> Result<(), SchedulerError> {
     if config.start_level >= levels.len() {
         return Err(SchedulerError::BadStartLevel(config.start_level));
     }
+    if !(0.0..=0.9).contains(&config.min_sim_fraction) {
+        return Err(SchedulerError::BadSimFraction(config.min_sim_fraction));
+    }
     Ok(())
 }
 
@@ -789,6 +805,38 @@ mod tests {
         // The budget handed to the simulation never included the render reserve.
         let max_budget = period - Duration::from_millis(4);
         assert!(work.budgets.iter().skip(20).all(|b| *b <= max_budget));
+    }
+
+    #[test]
+    fn a_render_slower_than_the_frame_still_leaves_the_simulation_its_share() {
+        let clock = VirtualClock::new();
+        let mut work = FakeWork::new(&clock);
+        work.render_cost = Duration::from_millis(40); // more than a 16.7 ms frame
+        work.step_cost_per_point = Duration::from_nanos(3000); // ~3 ms per 2 ms step
+        let mut scheduler = Scheduler::new(SchedulerConfig::default(), 0.0).expect("config");
+        let records = run(&mut scheduler, &clock, &mut work, 10);
+        for r in &records[1..] {
+            assert!(r.sim_steps > 0, "the simulation starved");
+            // At least about half of the stretched frame, less one step.
+            assert!(
+                r.sim_wall_s >= r.render_wall_s * 0.9 - 0.0031,
+                "sim {} s vs render {} s",
+                r.sim_wall_s,
+                r.render_wall_s
+            );
+            assert!(r.dropped_frames >= 2, "a 60+ ms frame drops refreshes");
+        }
+        // With the paper's rule alone (share 0) it would starve.
+        let clock = VirtualClock::new();
+        let mut work = FakeWork::new(&clock);
+        work.render_cost = Duration::from_millis(40);
+        let config = SchedulerConfig {
+            min_sim_fraction: 0.0,
+            ..SchedulerConfig::default()
+        };
+        let mut scheduler = Scheduler::new(config, 0.0).expect("config");
+        let records = run(&mut scheduler, &clock, &mut work, 10);
+        assert!(records[1..].iter().all(|r| r.sim_steps == 0));
     }
 
     #[test]
@@ -1023,6 +1071,10 @@ mod tests {
         }));
         assert!(bad(SchedulerConfig {
             start_level: 9,
+            ..SchedulerConfig::default()
+        }));
+        assert!(bad(SchedulerConfig {
+            min_sim_fraction: f64::NAN,
             ..SchedulerConfig::default()
         }));
         let mut s = Scheduler::new(SchedulerConfig::default(), 0.0).expect("ok");
