@@ -836,3 +836,235 @@ impl Reader {
         driver::initialise(self.protocol, &self.init, &mut link)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::clock::VirtualClock;
+    use crate::devices::desktop::DesktopEvent;
+    use crate::devices::replay::{ClockedReplay, DeviceSource, Replayer};
+    use crate::devices::sample_sessions::sample_sessions;
+    use crate::devices::session::Session;
+    use crate::devices::transport::FnOpener;
+    use crate::devices::transport::replay::{Pacing, ReplayTransport};
+
+    fn sample(stem: &str) -> Session {
+        sample_sessions()
+            .into_iter()
+            .find(|(s, _)| s == stem)
+            .map(|(_, s)| s)
+            .expect("sample session")
+    }
+
+    fn wait_for(hub: &Hub, cond: impl Fn(&HubSnapshot) -> bool) -> HubSnapshot {
+        let start = std::time::Instant::now();
+        loop {
+            let s = hub.snapshot();
+            if cond(&s) {
+                return s;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "timed out: {s:#?}"
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    #[test]
+    fn threaded_replay_rerecords_the_same_chunks_times_and_samples() {
+        for stem in ["spaceball", "fastrak-binary", "spacemouse-hid"] {
+            let original = sample(stem);
+            let dir = tempfile::tempdir().expect("tempdir");
+            let out = dir.path().join("again.session");
+            let replay = original.clone();
+            let opener: Box<dyn Opener> = Box::new(FnOpener::new("replay", move || {
+                Ok(Box::new(ReplayTransport::new(
+                    &replay,
+                    0,
+                    Pacing::AsFastAsPossible,
+                    Duration::from_millis(5),
+                )) as Box<dyn Transport>)
+            }));
+            let mut profile = original.header.profile.clone();
+            // One pass only: after the session ends, do not reopen for a long time.
+            profile.devices[0].driver.reconnect_min_s = 1000.0;
+            profile.devices[0].driver.reconnect_max_s = 1000.0;
+            let hub = Hub::start_with(
+                profile,
+                vec![Some(opener)],
+                Arc::new(VirtualClock::new()),
+                HubOptions {
+                    record_to: Some(out.clone()),
+                },
+            )
+            .expect("hub");
+            wait_for(&hub, |s| s.devices[0].state == DeviceState::Lost);
+            let live = hub.drain_events();
+            hub.stop().expect("stop");
+            let again = Session::load(&out).expect("load");
+            let chunks = |s: &Session| -> Vec<(Duration, Vec<u8>)> {
+                s.chunks(0).map(|(t, b)| (t, b.to_vec())).collect()
+            };
+            assert_eq!(chunks(&again), chunks(&original), "{stem}: chunks differ");
+            let mut r = Replayer::new(original).expect("replayer");
+            r.run_to_end();
+            assert_eq!(live, r.drain_events(), "{stem}: samples differ");
+        }
+    }
+
+    #[test]
+    fn desktop_events_are_recorded_on_the_clock_and_replay_identically() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("desk.session");
+        let clock = VirtualClock::new();
+        let hub = Hub::start(
+            Profile::desktop_default(),
+            Arc::new(clock.clone()),
+            HubOptions {
+                record_to: Some(out.clone()),
+            },
+        )
+        .expect("hub");
+        let start = hub.snapshot();
+        assert_eq!(start.devices[0].state, DeviceState::Running);
+        assert!(
+            start.role(Role::Head).pose.is_some(),
+            "head stand-in from the start"
+        );
+        let script = [
+            (10, DesktopEvent::MouseMove { x: 0.75, y: 0.25 }),
+            (
+                20,
+                DesktopEvent::MouseButton {
+                    button: 0,
+                    pressed: true,
+                },
+            ),
+            (
+                35,
+                DesktopEvent::Key {
+                    name: "W".into(),
+                    pressed: true,
+                },
+            ),
+            (50, DesktopEvent::Wheel { delta_lines: 1.0 }),
+        ];
+        for (ms, e) in &script {
+            clock.set(Duration::from_millis(*ms));
+            assert!(hub.feed_desktop(e.clone()));
+        }
+        clock.set(Duration::from_millis(60));
+        let live = hub.snapshot();
+        let wand = live.role(Role::Wand);
+        assert_eq!(wand.pressed, vec![0]);
+        assert_eq!(wand.at, Some(Duration::from_millis(50)));
+        assert_eq!(live.role(Role::Navigation).axes[2], -1.0);
+        hub.stop().expect("stop");
+
+        let session = Session::load(&out).expect("load");
+        let desktop_times: Vec<Duration> = session
+            .records
+            .iter()
+            .filter_map(|r| match r {
+                Record::Desktop { at, .. } => Some(*at),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            desktop_times,
+            [10, 20, 35, 50].map(Duration::from_millis).to_vec()
+        );
+        // Replayed on a virtual clock: the same roles at the same times.
+        let replay_clock = VirtualClock::new();
+        let replay = ClockedReplay::new(session, Arc::new(replay_clock.clone())).expect("replay");
+        replay_clock.set(Duration::from_millis(30));
+        let mid = replay.snapshot();
+        assert_eq!(mid.role(Role::Wand).pressed, vec![0]);
+        assert_eq!(
+            mid.role(Role::Navigation).axes,
+            [0.0; 6],
+            "W not pressed yet"
+        );
+        replay_clock.set(Duration::from_millis(60));
+        let end = replay.snapshot();
+        assert_eq!(
+            end.roles,
+            live.roles.clone().map(|mut r| {
+                r.state = DeviceState::Running;
+                r
+            })
+        );
+        assert!(
+            !replay.feed_desktop(DesktopEvent::FocusLost),
+            "replays ignore live input"
+        );
+    }
+
+    #[test]
+    fn stale_and_rate_follow_the_clock() {
+        let session = sample("opentrack");
+        let mut state = HubState::new(session.header.profile.clone());
+        state.opened(0, Duration::ZERO);
+        state.running(0, Duration::ZERO);
+        let mut decoder =
+            crate::devices::protocol::decoder_for(crate::devices::protocol::Protocol::Opentrack);
+        let mut events = Vec::new();
+        for (i, (_, bytes)) in session.chunks(0).take(30).enumerate() {
+            events.clear();
+            decoder.feed(bytes, &mut events);
+            // 30 datagrams 10 ms apart.
+            state.chunk(
+                0,
+                Duration::from_millis(10 * i as u64),
+                bytes.len(),
+                &events,
+            );
+        }
+        let snap = state.snapshot(Duration::from_millis(300));
+        assert_eq!(snap.devices[0].state, DeviceState::Running);
+        assert_eq!(snap.devices[0].rate_hz, 30.0);
+        let snap = state.snapshot(Duration::from_millis(800));
+        assert_eq!(
+            snap.devices[0].state,
+            DeviceState::Stale,
+            "0.5 s without data"
+        );
+        assert!(snap.role(Role::Head).pose.is_some(), "last good pose kept");
+        let snap = state.snapshot(Duration::from_millis(1200));
+        // Only the samples of the last second count: those after 0.2 s (210..=290 ms).
+        assert_eq!(snap.devices[0].rate_hz, 9.0);
+        state.chunk(0, Duration::from_millis(1250), 48, &events);
+        assert_eq!(
+            state.snapshot(Duration::from_millis(1250)).devices[0].state,
+            DeviceState::Running
+        );
+        state.lost(0, Duration::from_secs(2), "unplugged");
+        let snap = state.snapshot(Duration::from_secs(2));
+        assert_eq!(snap.role(Role::Head).state, DeviceState::Lost);
+        assert!(
+            snap.role(Role::Head).pose.is_some(),
+            "head pose survives a loss"
+        );
+    }
+
+    #[test]
+    fn a_wire_device_without_transport_is_lost_and_desktop_input_needs_a_desktop() {
+        let session = sample("spaceball");
+        let hub = Hub::start_with(
+            session.header.profile.clone(),
+            vec![None],
+            Arc::new(VirtualClock::new()),
+            HubOptions::default(),
+        )
+        .expect("hub");
+        let snap = hub.snapshot();
+        assert_eq!(snap.devices[0].state, DeviceState::Lost);
+        assert!(!hub.feed_desktop(DesktopEvent::FocusLost));
+        assert_eq!(
+            hub.newest(Role::Head).state,
+            DeviceState::Lost,
+            "unbound role"
+        );
+    }
+}
