@@ -231,8 +231,7 @@ pub fn euler_deg_from_orientation(q: DQuat) -> [f64; 3] {
     let c = DQuat::from_mat3(&ours_from_transmitter());
     let q_t = c.conjugate() * q * c;
     let (az, el, roll) = q_t.to_euler(EulerRot::ZYX);
-    // `+ 0.0` turns -0.0 into 0.0 so encoders never write "-0.00".
-    [az, el, roll].map(|a| a.to_degrees() + 0.0)
+    [az, el, roll].map(f64::to_degrees)
 }
 
 /// A FASTRAK quaternion (q0 scalar, q1, q2, q3 in the transmitter frame) -> our orientation.

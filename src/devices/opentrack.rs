@@ -38,7 +38,7 @@ pub fn raw_from_pose(pose: &Pose) -> ([f64; 3], [f64; 3]) {
     let (yaw, pitch, roll) = pose.orientation.as_dquat().to_euler(EulerRot::YXZ);
     (
         (pose.position_m.as_dvec3() * 100.0).to_array(),
-        [yaw, pitch, roll].map(|a| a.to_degrees() + 0.0),
+        [yaw, pitch, roll].map(f64::to_degrees),
     )
 }
 
