@@ -348,12 +348,24 @@ mod tests {
         assert!(motion(Extrapolation::Loop).validate(&skeleton).is_ok());
         let mut bad = motion(Extrapolation::Clamp);
         bad.keys[2].time_s = 0.5;
-        assert!(bad.validate(&skeleton).unwrap_err().contains("key 2 time"));
+        assert!(
+            bad.validate(&skeleton)
+                .expect_err("invalid")
+                .contains("key 2 time")
+        );
         let mut bad = motion(Extrapolation::Loop);
         bad.keys[3].posture = posture(0.3);
-        assert!(bad.validate(&skeleton).unwrap_err().contains("last key"));
+        assert!(
+            bad.validate(&skeleton)
+                .expect_err("invalid")
+                .contains("last key")
+        );
         let mut bad = motion(Extrapolation::Clamp);
         bad.keys[0].posture.angles_rad.push(0.0);
-        assert!(bad.validate(&skeleton).unwrap_err().contains("3 angles"));
+        assert!(
+            bad.validate(&skeleton)
+                .expect_err("invalid")
+                .contains("3 angles")
+        );
     }
 }

@@ -388,7 +388,7 @@ fn write_scalars(out: &mut String, key: &str, values: &[f32]) {
     }
     let _ = writeln!(out, "{key} = [");
     for chunk in values.chunks(8) {
-        out.push_str(" ");
+        out.push(' ');
         for v in chunk {
             out.push(' ');
             float(out, *v);
@@ -402,7 +402,7 @@ fn write_scalars(out: &mut String, key: &str, values: &[f32]) {
 fn write_ints(out: &mut String, key: &str, values: &[u32]) {
     let _ = writeln!(out, "{key} = [");
     for chunk in values.chunks(16) {
-        out.push_str(" ");
+        out.push(' ');
         for v in chunk {
             let _ = write!(out, " {v},");
         }

@@ -177,7 +177,7 @@ fn keyed_value(keys: &[ParamKey], time_s: f32) -> f32 {
     let Some(first) = keys.first() else {
         return 0.0;
     };
-    if !(time_s > first.time_s) {
+    if time_s.is_nan() || time_s <= first.time_s {
         return first.value;
     }
     for w in keys.windows(2) {
@@ -682,7 +682,7 @@ impl ShapeGeometry {
         for _ in 0..24 {
             let (v, g) = self.value_and_gradient(q);
             let len2 = g.length_squared();
-            if !(len2 > 1e-20) || !v.is_finite() {
+            if len2.is_nan() || len2 <= 1e-20 || !v.is_finite() {
                 break;
             }
             let step = g * (v / len2);
@@ -983,10 +983,10 @@ mod tests {
         ];
         for d in ds {
             for p in samples() {
-                if let Resolved::Bend { curvature_per_m: k } = d {
-                    if 1.0 - k * p.x < 0.2 {
-                        continue; // beyond the centre of curvature: outside the valid domain
-                    }
+                if let Resolved::Bend { curvature_per_m: k } = d
+                    && 1.0 - k * p.x < 0.2
+                {
+                    continue; // beyond the centre of curvature: outside the valid domain
                 }
                 let q = d.apply(p);
                 let (back, jac) = d.invert(q);
