@@ -1,0 +1,191 @@
+//! End to end: `leman replay SESSION --headless` plays a recorded FASTRAK session (head and
+//! wand) through the whole app — decoders, hub state, vehicle, the torso's surface simulation,
+//! stereo, the renderer on lavapipe — and writes PNG frames and the JSON-lines frame log.
+//!
+//! Without a GPU driver the test prints a loud SKIPPED, unless `LEMAN_REQUIRE_GPU=1`, when it
+//! fails.
+
+use leman::render::GpuContext;
+use leman::render::RgbaImage;
+use leman::render::device_caps::gpu_required_by_env;
+use std::path::Path;
+use std::process::Command;
+
+fn gpu_available() -> bool {
+    match GpuContext::new_headless() {
+        Ok(_) => true,
+        Err(e) if gpu_required_by_env() => panic!("LEMAN_REQUIRE_GPU=1 but no GPU: {e}"),
+        Err(e) => {
+            eprintln!("\n*** SKIPPED app_replay: no GPU adapter ({e}). ***\n");
+            false
+        }
+    }
+}
+
+/// Pixels that look like the skin (light, warm: red > green > blue).
+fn skin_pixels(image: &RgbaImage) -> usize {
+    image
+        .pixels
+        .chunks_exact(4)
+        .filter(|p| {
+            let (r, g, b) = (i32::from(p[0]), i32::from(p[1]), i32::from(p[2]));
+            r > 140 && r > g + 10 && g > b && r - b > 35
+        })
+        .count()
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn headless_replay_of_a_fastrak_session_writes_frames_and_a_frame_log() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frames = dir.path().join("frames");
+    let runtime = dir.path().join("xdg");
+    std::fs::create_dir_all(&runtime).expect("runtime dir");
+    let session = root().join("devices/sessions/fastrak-ascii.session");
+    let output = Command::new(env!("CARGO_BIN_EXE_leman"))
+        .current_dir(root())
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .args([
+            "replay",
+            "--headless",
+            "--json",
+            "--stereo",
+            "sbs",
+            "--size",
+            "320x180",
+        ])
+        .args(["--every", "20", "--max-frames", "60", "--frames"])
+        .arg(&frames)
+        .arg(&session)
+        .output()
+        .expect("run leman");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "leman replay failed: {}\n{stdout}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_str(stdout.trim()).expect("summary JSON");
+    assert_eq!(summary["frames"], 60);
+    assert_eq!(summary["pngs"], 3);
+
+    // The log: one JSON object per frame, in order.
+    let log = std::fs::read_to_string(frames.join("frames.jsonl")).expect("log");
+    let records: Vec<serde_json::Value> = log
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("log line is JSON"))
+        .collect();
+    assert_eq!(records.len(), 60);
+    let period = 1.0 / 60.0;
+    for (n, r) in records.iter().enumerate() {
+        assert_eq!(r["frame"], n as u64);
+        // Offline pacing: the simulation is exactly at n+1 frame periods, by real steps.
+        let sim_time = r["sim_time_s"].as_f64().expect("sim time");
+        assert!(
+            (sim_time - period * (n as f64 + 1.0)).abs() < 1e-4,
+            "frame {n}: {sim_time}"
+        );
+        assert!(r["deforming"].as_bool().expect("deforming"));
+        assert!(
+            r["sim_steps"].as_u64().expect("steps") > 0,
+            "frame {n} took no steps"
+        );
+        assert_eq!(r["skin_points"], 1024);
+        assert!(r["render_wall_s"].as_f64().expect("render") > 0.0);
+        // The second read is later in the session than the first.
+        let first = r["first_read"]["read_at_s"].as_f64().expect("first read");
+        let second = r["render_read"]["read_at_s"].as_f64().expect("second read");
+        assert!((first - period * n as f64).abs() < 1e-6);
+        assert!(second > first);
+    }
+    // The session's FASTRAK starts sending after its banner; from then on both head and wand
+    // poses are used, fresh (FASTRAK gives each station 60 records a second).
+    let tracked: Vec<&serde_json::Value> = records
+        .iter()
+        .filter(|r| !r["render_read"]["head"].is_null())
+        .collect();
+    assert!(
+        tracked.len() >= 30,
+        "only {} frames had a head pose",
+        tracked.len()
+    );
+    let mut head_positions = Vec::new();
+    let mut with_wand = 0;
+    for r in &tracked {
+        let head = &r["render_read"]["head"];
+        let age = head["age_s"].as_f64().expect("age");
+        assert!((0.0..0.1).contains(&age), "head sample {age} s old");
+        if !r["render_read"]["wand"].is_null() {
+            with_wand += 1;
+        }
+        head_positions.push(head["position_m"].to_string());
+    }
+    // Station 2 (the wand) starts a record or two after station 1.
+    assert!(
+        with_wand + 2 >= tracked.len(),
+        "wand in only {with_wand} of {}",
+        tracked.len()
+    );
+    head_positions.dedup();
+    assert!(
+        head_positions.len() > 10,
+        "the head should move through the session"
+    );
+
+    // The frames: PNGs of the composed side-by-side image showing the skin in both halves.
+    let pngs: Vec<_> = (0..60)
+        .step_by(20)
+        .map(|n| frames.join(format!("frame_{n:05}.png")))
+        .collect();
+    let mut images = Vec::new();
+    for png in &pngs {
+        let image = RgbaImage::load_png(png).expect("frame PNG");
+        assert_eq!((image.width, image.height), (320, 180));
+        let left = RgbaImage {
+            width: 160,
+            height: 180,
+            pixels: image
+                .pixels
+                .chunks_exact(320 * 4)
+                .flat_map(|row| row[..160 * 4].to_vec())
+                .collect(),
+        };
+        let right = RgbaImage {
+            width: 160,
+            height: 180,
+            pixels: image
+                .pixels
+                .chunks_exact(320 * 4)
+                .flat_map(|row| row[160 * 4..].to_vec())
+                .collect(),
+        };
+        for (half, name) in [(&left, "left"), (&right, "right")] {
+            let skin = skin_pixels(half);
+            assert!(
+                skin > 160 * 180 / 50,
+                "{}: only {skin} skin pixels in the {name} eye",
+                png.display()
+            );
+        }
+        images.push(image);
+    }
+    assert_ne!(images[0].pixels, images[2].pixels, "frames must change");
+}
+
+#[test]
+fn a_missing_session_is_a_clear_error() {
+    let output = Command::new(env!("CARGO_BIN_EXE_leman"))
+        .current_dir(root())
+        .args(["replay", "--headless", "no/such.session"])
+        .output()
+        .expect("run leman");
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("no/such.session"), "{stderr}");
+}
