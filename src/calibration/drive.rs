@@ -62,10 +62,24 @@ pub fn run_on_session(
     config: ProcedureConfig,
     frames: &TrackerFrames,
 ) -> Result<ReplayOutcome, ReplayError> {
+    let mut events = Vec::new();
+    let procedure = run_on_session_with(session, config, frames, |at, e, _| {
+        events.push((at, e.clone()));
+    })?;
+    Ok(ReplayOutcome { procedure, events })
+}
+
+/// [`run_on_session`] calling `observer(session time, event, procedure after it)` for every
+/// event as it happens (for narrating a replay).
+pub fn run_on_session_with(
+    session: Session,
+    config: ProcedureConfig,
+    frames: &TrackerFrames,
+    mut observer: impl FnMut(Duration, &ProcedureEvent, &CornerProcedure),
+) -> Result<CornerProcedure, ReplayError> {
     let mut replayer = Replayer::new(session)?;
     let mut procedure = CornerProcedure::new(config);
     let mut feeder = SnapshotFeeder::new();
-    let mut events = Vec::new();
     loop {
         let at = match replayer.step() {
             None => break,
@@ -74,11 +88,11 @@ pub fn run_on_session(
         };
         let snapshot = replayer.snapshot(at);
         if let Some(e) = feeder.feed(&mut procedure, &snapshot, frames) {
-            events.push((at, e));
+            observer(at, &e, &procedure);
         }
         if matches!(procedure.step(), Step::Done(_)) {
             break;
         }
     }
-    Ok(ReplayOutcome { procedure, events })
+    Ok(procedure)
 }

@@ -4,14 +4,23 @@
 
 use anyhow::{Context, bail};
 use glam::{Mat4, Quat, Vec3};
+use leman::calibration::drive::{SnapshotFeeder, run_on_session_with};
 use leman::calibration::{
-    CalibrationProfile, Corner, FitOptions, ScreenFit, ScreenRect, Units, fit_screen,
+    CalibrationProfile, Corner, CornerProcedure, FitOptions, ProcedureConfig, ProcedureEvent,
+    ScreenFit, ScreenRect, Step, Units, fit_screen,
 };
+use leman::clock::RealClock;
+use leman::devices::hub::{Hub, HubOptions};
+use leman::devices::profile::{Profile as DeviceProfile, Role};
+use leman::devices::session::Session;
 use leman::pose::Pose;
 use leman::stereo::{EyeView, ViewSettings, eye_views};
 use serde::Deserialize;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 /// Arguments of `leman calibrate`.
 #[derive(Debug, Default, clap::Args)]
@@ -306,8 +315,143 @@ fn check(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn interactive(_args: &Args) -> anyhow::Result<()> {
-    bail!(
-        "the interactive procedure (live devices or --replay) is not wired yet; use --corners or --check"
-    )
+fn describe(event: &ProcedureEvent) -> String {
+    match event {
+        ProcedureEvent::PressIgnoredMoving {
+            speed_m_per_s,
+            spread_m,
+        } => format!(
+            "  press ignored: the wand is moving ({speed_m_per_s:.3} m/s, {spread_m:.4} m spread); hold it still"
+        ),
+        ProcedureEvent::PressIgnoredTooFewSamples { samples } => {
+            format!("  press ignored: only {samples} wand samples so far; hold still a moment")
+        }
+        ProcedureEvent::SampleIgnored => "  a wand sample was not finite (ignored)".to_owned(),
+        ProcedureEvent::Recorded {
+            corner,
+            mean_m,
+            samples,
+        } => format!(
+            "  recorded {} at {:?} m ({samples} samples)",
+            corner.name(),
+            mean_m.to_array()
+        ),
+        ProcedureEvent::Accepted => "  accepted".to_owned(),
+        ProcedureEvent::Restarted => "  starting again".to_owned(),
+    }
+}
+
+/// Prints the prompt whenever it changes (text mode only; prompts go to stderr with --json).
+struct Narrator {
+    last_prompt: String,
+    json: bool,
+}
+
+impl Narrator {
+    fn say(&self, line: &str) {
+        if self.json {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    }
+
+    fn event(&mut self, procedure: &CornerProcedure, event: Option<&ProcedureEvent>) {
+        if let Some(e) = event {
+            self.say(&describe(e));
+        }
+        let prompt = procedure.prompt();
+        if prompt != self.last_prompt {
+            self.say(&prompt);
+            self.last_prompt = prompt;
+        }
+    }
+}
+
+fn finish(args: &Args, procedure: &CornerProcedure, source: &str) -> anyhow::Result<()> {
+    match procedure.step() {
+        Step::Done(fit) => save_fit(args, fit, &format!("touched corners ({source})")),
+        other => bail!(
+            "{source}: the procedure did not finish (at: {}); nothing written",
+            match other {
+                Step::Touch { corner, .. } => format!("waiting for the {} corner", corner.name()),
+                Step::Review(Ok(_)) => "review, not accepted".to_owned(),
+                Step::Review(Err(e)) => format!("review, the fit failed: {e}"),
+                Step::Done(_) => "done".to_owned(),
+            }
+        ),
+    }
+}
+
+fn interactive(args: &Args) -> anyhow::Result<()> {
+    if args.out.is_none() {
+        bail!("the corner procedure needs --out PROFILE.toml");
+    }
+    let base = base_profile(args)?;
+    let mut narrator = Narrator {
+        last_prompt: String::new(),
+        json: args.json,
+    };
+    if let Some(path) = &args.replay {
+        let session = Session::load(path)?;
+        narrator.event(&CornerProcedure::new(ProcedureConfig::default()), None);
+        let json = narrator.json;
+        let procedure = run_on_session_with(
+            session,
+            ProcedureConfig::default(),
+            &base.tracker,
+            |at, e, p| {
+                if !json {
+                    print!("[{:7.3} s]", at.as_secs_f64());
+                }
+                narrator.event(p, Some(e));
+            },
+        )?;
+        return finish(args, &procedure, &path.display().to_string());
+    }
+    live(args, &base, &mut narrator)
+}
+
+fn live(args: &Args, base: &CalibrationProfile, narrator: &mut Narrator) -> anyhow::Result<()> {
+    let Some(devices) = &args.profile else {
+        bail!(
+            "live calibration needs a tracked wand: pass --profile DEVICES.toml (e.g. devices/fastrak-spaceball.toml), or --replay SESSION; the desktop mouse has no 3D position"
+        );
+    };
+    let profile = DeviceProfile::load(devices)?;
+    if profile.binding(Role::Wand).is_none() {
+        bail!("{}: no device is bound to the wand role", devices.display());
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
+            .context("cannot install the Ctrl-C handler")?;
+    }
+    let hub = Hub::start(profile, Arc::new(RealClock::new()), HubOptions::default())?;
+    let mut procedure = CornerProcedure::new(ProcedureConfig::default());
+    let mut feeder = SnapshotFeeder::new();
+    narrator.event(&procedure, None);
+    let mut last_state = None;
+    while !stop.load(Ordering::SeqCst) {
+        let snapshot = hub.snapshot();
+        let wand = snapshot.role(Role::Wand);
+        if last_state != Some(wand.state) {
+            narrator.say(&format!("  wand device: {:?}", wand.state));
+            last_state = Some(wand.state);
+        }
+        let event = feeder.feed(&mut procedure, &snapshot, &base.tracker);
+        if event.is_some() {
+            narrator.event(&procedure, event.as_ref());
+        }
+        if matches!(procedure.step(), Step::Done(_)) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    hub.stop()?;
+    if stop.load(Ordering::SeqCst) {
+        bail!("cancelled; nothing written");
+    }
+    finish(args, &procedure, "live devices")
 }
