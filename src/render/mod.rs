@@ -10,6 +10,7 @@ pub mod adapter;
 pub mod batch;
 pub mod capture;
 pub mod device_caps;
+pub mod egui_view;
 pub mod mesh;
 pub mod reference;
 pub mod renderer;

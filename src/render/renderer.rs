@@ -183,8 +183,11 @@ pub enum RenderError {
 pub struct RenderTarget {
     /// The resolved colour texture (RENDER_ATTACHMENT | COPY_SRC | TEXTURE_BINDING).
     pub color: wgpu::Texture,
-    /// View of `color`: bind this to show the image (e.g. as an egui texture).
+    /// View of `color` in its own format (sRGB: sampling decodes to linear light).
     pub color_view: wgpu::TextureView,
+    /// View of `color` that reads the stored bytes as gamma-encoded values (RGBA8 unorm over
+    /// the sRGB texture): what egui expects of a texture it shows.
+    pub gamma_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     msaa_view: Option<wgpu::TextureView>,
     width: u32,
@@ -423,6 +426,7 @@ impl Renderer {
             depth_or_array_layers: 1,
         };
         let samples = self.options.msaa_samples;
+        let gamma_format = self.options.color_format.remove_srgb_suffix();
         let color = self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("leman colour"),
             size,
@@ -433,7 +437,7 @@ impl Renderer {
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::COPY_SRC
                 | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
+            view_formats: &[gamma_format],
         });
         let depth = self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("leman depth"),
@@ -461,6 +465,11 @@ impl Renderer {
         });
         Ok(RenderTarget {
             color_view: color.create_view(&wgpu::TextureViewDescriptor::default()),
+            gamma_view: color.create_view(&wgpu::TextureViewDescriptor {
+                label: Some("leman colour (gamma view)"),
+                format: Some(gamma_format),
+                ..Default::default()
+            }),
             color,
             depth_view: depth.create_view(&wgpu::TextureViewDescriptor::default()),
             msaa_view,
