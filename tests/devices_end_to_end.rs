@@ -183,7 +183,7 @@ fn run_fake(kind: Kind, master: &mut TTYPort, stop: &AtomicBool, paused: &Atomic
                     Vec::new()
                 }
                 (Kind::Fastrak, c) if c.starts_with('l') => {
-                    if let Some(st) = c[1..2].parse().ok() {
+                    if let Ok(st) = c[1..2].parse() {
                         stations.push(st);
                     }
                     Vec::new()

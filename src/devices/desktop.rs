@@ -183,7 +183,7 @@ impl DesktopDevice {
             DesktopEvent::Key { name, pressed } => {
                 if key_axis(name).is_some() {
                     let lower = name.to_ascii_lowercase();
-                    let held = self.keys_held.iter().any(|k| *k == lower);
+                    let held = self.keys_held.contains(&lower);
                     if *pressed && !held {
                         self.keys_held.push(lower);
                         out.push(self.axes_event());
