@@ -4,6 +4,7 @@
 use anyhow::{Context, bail};
 use leman::devices::decoder::Decoder;
 use leman::devices::fastrak::{FastrakSettings, LengthUnit};
+use leman::devices::fuzz_harness::merge_drops;
 use leman::devices::opentrack::DATAGRAM_LEN;
 use leman::devices::profile::DeviceKind;
 use leman::devices::protocol::{DecoderSettings, Framing, Protocol, decoder_with_settings};
@@ -170,22 +171,6 @@ fn decode_raw<W: Write>(args: &Args, bytes: &[u8], printer: &mut Printer<W>) -> 
     }
     printer.print(&merge_drops(events), None)?;
     Ok(())
-}
-
-/// Merges consecutive `Dropped` events (a decoder reports drops at the end of each read, so
-/// without this the output would depend on how the capture was chunked).
-fn merge_drops(events: Vec<DeviceEvent>) -> Vec<DeviceEvent> {
-    let mut out: Vec<DeviceEvent> = Vec::with_capacity(events.len());
-    for e in events {
-        if let (DeviceEvent::Dropped { bytes }, Some(DeviceEvent::Dropped { bytes: last })) =
-            (&e, out.last_mut())
-        {
-            *last += bytes;
-            continue;
-        }
-        out.push(e);
-    }
-    out
 }
 
 fn decode_session<W: Write>(

@@ -1,0 +1,9 @@
+//! Fuzzes the spaceball decoder: arbitrary bytes in arbitrary chunks (see
+//! `leman::devices::fuzz_harness::fuzz_decoder` for the invariants checked).
+#![no_main]
+
+use leman::devices::fuzz_harness::fuzz_decoder;
+use leman::devices::protocol::Protocol;
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| fuzz_decoder(Protocol::Spaceball, data));
