@@ -123,6 +123,106 @@ pub fn skin_from_surface(mesh: &crate::sim::SurfaceMesh, color: Rgba) -> SkinSur
     }
 }
 
+/// Muscle or bone, from a shape's name (the character format has no such field): names with
+/// `bone`, `rib`, `pelvis`, `spine`, `vertebra`, `skull`, `scapula`, `clavicle`, `humerus`,
+/// `femur` are bones, the rest muscles.
+pub fn kind_from_name(name: &str) -> ShapeKind {
+    const BONES: [&str; 10] = [
+        "bone", "rib", "pelvis", "spine", "vertebra", "skull", "scapula", "clavicle", "humerus",
+        "femur",
+    ];
+    let lower = name.to_ascii_lowercase();
+    if BONES.iter().any(|b| lower.contains(b)) {
+        ShapeKind::Bone
+    } else {
+        ShapeKind::Muscle
+    }
+}
+
+/// Scene data for a character in one posture: its shapes (tessellated), its skeleton (bones
+/// parent to child, joints), its tissue springs (skin point to anchor), and its skin, from the
+/// simulation's `surface` when given, else the skin's stored positions. Layers and everything
+/// not about the character (floor, screen, wand) keep their defaults.
+pub fn scene_from_character(
+    character: &crate::character::Character,
+    posture: &crate::character::Posture,
+    time_s: f32,
+    surface: Option<&crate::sim::SurfaceMesh>,
+    detail: TessellationDetail,
+) -> scene::Scene {
+    let skeleton = &character.skeleton;
+    let pose = skeleton.forward_kinematics(posture);
+    let joints: Vec<Vec3> = pose.world_from_joint.iter().map(|p| p.position_m).collect();
+    let bones = skeleton
+        .joints
+        .iter()
+        .enumerate()
+        .filter_map(|(i, j)| {
+            let parent = joints.get(j.parent?.index())?;
+            Some(scene::Segment {
+                a: *parent,
+                b: *joints.get(i)?,
+            })
+        })
+        .collect();
+    let instances: Vec<_> = character
+        .shapes
+        .iter()
+        .map(|shape| shape.instance(skeleton, posture, &pose, time_s))
+        .collect();
+    let shapes = character
+        .shapes
+        .iter()
+        .zip(&instances)
+        .map(|(shape, instance)| {
+            let kind = kind_from_name(&shape.name);
+            let color = match kind {
+                ShapeKind::Bone => Rgba::BONE,
+                ShapeKind::Muscle => Rgba::MUSCLE,
+            };
+            scene_shape(instance, kind, color, detail)
+        })
+        .collect();
+    let skin_points: &[Vec3] = match surface {
+        Some(s) => &s.positions_m,
+        None => &character.skin.positions_m,
+    };
+    let springs = character
+        .tissue
+        .iter()
+        .filter_map(|t| {
+            let a = *skin_points.get(t.skin_point as usize)?;
+            let b = instances
+                .get(t.shape.index())?
+                .rest_point_to_world(t.anchor_rest_m);
+            Some(scene::Segment { a, b })
+        })
+        .collect();
+    let skin = match surface {
+        Some(s) => Some(skin_from_surface(s, Rgba::SKIN)),
+        None => TriMesh::periodic_grid(
+            &character.skin.positions_m,
+            character.skin.around,
+            character.skin.along,
+        )
+        .map(|mesh| SkinSurface {
+            mesh,
+            color: Rgba::SKIN,
+        }),
+    };
+    scene::Scene {
+        skin,
+        shapes,
+        skeleton: scene::SkeletonLines {
+            bones,
+            joints,
+            joint_radius_m: 0.006,
+        },
+        springs,
+        ..scene::Scene::default()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,6 +278,22 @@ mod tests {
                 assert!(n.dot(Vec3::new(p.x, 0.0, p.z)) > 0.0, "{p} {n}");
             }
         }
+    }
+
+    #[test]
+    fn torso_character_becomes_a_clean_scene() {
+        let c = crate::character::examples::build("torso", 32, 32).expect("torso");
+        let posture = crate::character::Posture::neutral(&c.skeleton);
+        let scene = scene_from_character(&c, &posture, 0.0, None, TessellationDetail::default());
+        assert_eq!(scene.shapes.len(), c.shapes.len());
+        assert_eq!(scene.skeleton.joints.len(), c.skeleton.joints.len());
+        assert_eq!(scene.springs.len(), c.tissue.len());
+        let skin = scene.skin.as_ref().expect("skin");
+        assert_eq!(skin.mesh.positions.len(), 1024);
+        let g = crate::render::batch::FrameGeometry::build(&scene);
+        assert!(g.sanitized.is_clean(), "{:?}", g.sanitized);
+        assert_eq!(kind_from_name("left_Rib_3"), ShapeKind::Bone);
+        assert_eq!(kind_from_name("pectoral"), ShapeKind::Muscle);
     }
 
     #[test]

@@ -245,6 +245,47 @@ impl TriMesh {
     }
 }
 
+impl TriMesh {
+    /// A skin grid of `around × along` points (index `j·around + i`, periodic in `i`, open in
+    /// `j`), triangulated with smooth normals. Triangles face away from each row's centroid
+    /// (outwards for a tube-like skin). `None` when the sizes do not fit.
+    pub fn periodic_grid(positions: &[Vec3], around: u32, along: u32) -> Option<Self> {
+        let (m, n) = (around as usize, along as usize);
+        if m < 3 || n < 2 || positions.len() != m * n {
+            return None;
+        }
+        let mut indices = Vec::with_capacity(m * (n - 1) * 6);
+        for j in 0..n - 1 {
+            for i in 0..m {
+                let a = (j * m + i) as u32;
+                let b = (j * m + (i + 1) % m) as u32;
+                let c = ((j + 1) * m + i) as u32;
+                let d = ((j + 1) * m + (i + 1) % m) as u32;
+                indices.extend_from_slice(&[a, c, b, b, c, d]);
+            }
+        }
+        let mut mesh = Self::from_triangles(positions.to_vec(), indices);
+        // Orient outwards: compare normals with the direction from the row's centroid.
+        let mut score = 0.0f32;
+        for j in 0..n {
+            let row = &positions[j * m..(j + 1) * m];
+            let centroid = row.iter().copied().sum::<Vec3>() / m as f32;
+            for (k, p) in row.iter().enumerate() {
+                score += mesh.normals[j * m + k].dot(*p - centroid);
+            }
+        }
+        if score < 0.0 {
+            for tri in mesh.indices.chunks_exact_mut(3) {
+                tri.swap(1, 2);
+            }
+            for n in &mut mesh.normals {
+                *n = -*n;
+            }
+        }
+        Some(mesh)
+    }
+}
+
 /// A rigid frame at `a` whose +Y points to `b` (for placing cylinders along segments).
 pub fn frame_along(a: Vec3, b: Vec3) -> Option<Mat4> {
     let d = b - a;
@@ -425,6 +466,31 @@ mod tests {
         ));
         m.normals.pop();
         assert!(matches!(m.validate(), Err(MeshError::NormalCount { .. })));
+    }
+
+    #[test]
+    fn periodic_grid_faces_outwards_either_way_round() {
+        let ring = |y: f32, sign: f32| -> Vec<Vec3> {
+            (0..8)
+                .map(|i| {
+                    let a = sign * std::f32::consts::TAU * i as f32 / 8.0;
+                    Vec3::new(a.cos() * 0.1, y, a.sin() * 0.1)
+                })
+                .collect()
+        };
+        for sign in [1.0, -1.0] {
+            let pts: Vec<Vec3> = (0..4).flat_map(|j| ring(j as f32 * 0.05, sign)).collect();
+            let m = TriMesh::periodic_grid(&pts, 8, 4).expect("grid");
+            m.validate().expect("valid");
+            assert_eq!(m.triangle_count(), 8 * 3 * 2);
+            for tri in m.indices.chunks_exact(3) {
+                let p: Vec<Vec3> = tri.iter().map(|&i| m.positions[i as usize]).collect();
+                let n = (p[1] - p[0]).cross(p[2] - p[0]);
+                let mid = (p[0] + p[1] + p[2]) / 3.0;
+                assert!(n.dot(Vec3::new(mid.x, 0.0, mid.z)) > 0.0);
+            }
+        }
+        assert!(TriMesh::periodic_grid(&[Vec3::ZERO; 5], 3, 2).is_none());
     }
 
     #[test]

@@ -136,6 +136,22 @@ pub fn reference_scene() -> Scene {
     }
 }
 
+/// The paper's torso (the example character `torso` with a 32 × 32 = 1024-point skin) at its
+/// neutral posture, with the floor grid and the screen border: the benchmark scene.
+pub fn torso_scene() -> Option<Scene> {
+    let character = crate::character::examples::build("torso", 32, 32)?;
+    let posture = crate::character::Posture::neutral(&character.skeleton);
+    let mut scene = super::adapter::scene_from_character(
+        &character,
+        &posture,
+        0.0,
+        None,
+        super::adapter::TessellationDetail::default(),
+    );
+    scene.screen_corners = Some(REFERENCE_SCREEN_CORNERS);
+    Some(scene)
+}
+
 /// A torso-like closed-ish skin of about `points` vertices (a tube of rings × segments, the
 /// count rounded to whole rings), for benchmarks: the paper's 1024-point torso is
 /// `torso_skin(1024)`.
