@@ -54,56 +54,59 @@ pub fn character_ui(ui: &mut egui::Ui, state: &mut AppState) {
         "Skin: {around} × {along} = {} points",
         around * along
     ));
-    egui::Grid::new("character_params")
-        .num_columns(2)
-        .show(ui, |ui| {
-            ui.label("Skin elasticity ×");
-            ui.add(egui::Slider::new(&mut p.elasticity_scale, 0.1..=10.0).logarithmic(true));
-            ui.end_row();
-            ui.label("Point mass (kg)");
-            ui.add(
-                egui::Slider::new(&mut p.point_mass_kg, 1e-4..=0.1)
-                    .logarithmic(true)
-                    .max_decimals(5),
-            );
-            ui.end_row();
-            ui.label("Point damping (N·s/m)");
-            ui.add(egui::Slider::new(&mut p.point_damping_n_s_per_m, 0.0..=1.0).max_decimals(4));
-            ui.end_row();
-            ui.label("Tissue stiffness (N/m)");
-            ui.add(egui::Slider::new(&mut p.tissue_stiffness_n_per_m, 0.0..=500.0).max_decimals(2));
-            ui.end_row();
-            ui.label("Tissue damping (N·s/m)");
-            ui.add(egui::Slider::new(&mut p.tissue_damping_n_s_per_m, 0.0..=5.0).max_decimals(3));
-            ui.end_row();
-            ui.label("Fat (m)");
-            ui.add(egui::Slider::new(&mut p.fat_m, 0.0..=0.05).max_decimals(4));
-            ui.end_row();
-        });
+    ui.add(
+        egui::Slider::new(&mut p.elasticity_scale, 0.1..=10.0)
+            .logarithmic(true)
+            .text("Skin elasticity ×"),
+    );
+    ui.add(
+        egui::Slider::new(&mut p.point_mass_kg, 1e-4..=0.1)
+            .logarithmic(true)
+            .max_decimals(5)
+            .text("Point mass (kg)"),
+    );
+    ui.add(
+        egui::Slider::new(&mut p.point_damping_n_s_per_m, 0.0..=1.0)
+            .max_decimals(4)
+            .text("Point damping (N·s/m)"),
+    );
+    ui.add(
+        egui::Slider::new(&mut p.tissue_stiffness_n_per_m, 0.0..=500.0)
+            .max_decimals(2)
+            .text("Tissue stiffness (N/m)"),
+    );
+    ui.add(
+        egui::Slider::new(&mut p.tissue_damping_n_s_per_m, 0.0..=5.0)
+            .max_decimals(3)
+            .text("Tissue damping (N·s/m)"),
+    );
+    ui.add(
+        egui::Slider::new(&mut p.fat_m, 0.0..=0.05)
+            .max_decimals(4)
+            .step_by(0.001)
+            .text("Fat (m)"),
+    );
     if p != state.params {
         state.set_params(p);
     }
-    ui.horizontal(|ui| {
-        ui.label("Motion:");
-        let names: Vec<String> = state
-            .character
-            .motions
-            .iter()
-            .map(|m| m.name.clone())
-            .collect();
-        let current = state
-            .motion
-            .and_then(|m| names.get(m).cloned())
-            .unwrap_or_else(|| "neutral posture".into());
-        egui::ComboBox::from_id_salt("motion")
-            .selected_text(current)
-            .show_ui(ui, |ui| {
-                ui.selectable_value(&mut state.motion, None, "neutral posture");
-                for (k, name) in names.iter().enumerate() {
-                    ui.selectable_value(&mut state.motion, Some(k), name);
-                }
-            });
-    });
+    let names: Vec<String> = state
+        .character
+        .motions
+        .iter()
+        .map(|m| m.name.clone())
+        .collect();
+    let current = state
+        .motion
+        .and_then(|m| names.get(m).cloned())
+        .unwrap_or_else(|| "neutral posture".into());
+    egui::ComboBox::from_label("Motion")
+        .selected_text(current)
+        .show_ui(ui, |ui| {
+            ui.selectable_value(&mut state.motion, None, "neutral posture");
+            for (k, name) in names.iter().enumerate() {
+                ui.selectable_value(&mut state.motion, Some(k), name);
+            }
+        });
     ui.label("Layers:");
     ui.horizontal_wrapped(|ui| {
         let l = &mut state.layers;
@@ -141,24 +144,27 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     let mut min_ms = t.min_step_s * 1e3;
     let mut max_ms = t.max_step_s * 1e3;
     let mut fixed_ms = t.fixed_step_s * 1e3;
-    egui::Grid::new("tolerances").num_columns(2).show(ui, |ui| {
-        ui.label("Position tolerance ε_r");
-        ui.add(
-            egui::Slider::new(&mut t.position_tolerance, 1e-6..=1e-2)
-                .logarithmic(true)
-                .max_decimals(6),
-        );
-        ui.end_row();
-        ui.label("Min step (ms)");
-        ui.add(egui::Slider::new(&mut min_ms, 0.01..=5.0).logarithmic(true));
-        ui.end_row();
-        ui.label("Max step (ms)");
-        ui.add(egui::Slider::new(&mut max_ms, 0.1..=40.0).logarithmic(true));
-        ui.end_row();
-        ui.label("Fixed step (ms)");
-        ui.add(egui::Slider::new(&mut fixed_ms, 0.05..=10.0).logarithmic(true));
-        ui.end_row();
-    });
+    ui.add(
+        egui::Slider::new(&mut t.position_tolerance, 1e-6..=1e-2)
+            .logarithmic(true)
+            .max_decimals(6)
+            .text("position tolerance ε_r"),
+    );
+    ui.add(
+        egui::Slider::new(&mut min_ms, 0.01..=5.0)
+            .logarithmic(true)
+            .text("min step (ms)"),
+    );
+    ui.add(
+        egui::Slider::new(&mut max_ms, 0.1..=40.0)
+            .logarithmic(true)
+            .text("max step (ms)"),
+    );
+    ui.add(
+        egui::Slider::new(&mut fixed_ms, 0.05..=10.0)
+            .logarithmic(true)
+            .text("fixed step (ms)"),
+    );
     t.min_step_s = min_ms * 1e-3;
     t.max_step_s = (max_ms * 1e-3).max(t.min_step_s);
     t.fixed_step_s = fixed_ms * 1e-3;
