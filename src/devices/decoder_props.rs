@@ -92,6 +92,36 @@ proptest! {
     }
 
     #[test]
+    fn fastrak_any_output_list_survives_garbage(
+        items in proptest::collection::vec(proptest::sample::select(vec![0u8, 1, 2, 4, 11, 16]), 1..8),
+        stylus_bytes in 1u8..=2,
+        binary in any::<bool>(),
+        garbage in proptest::collection::vec(any::<u8>(), 0..300),
+        cut in any::<usize>(),
+    ) {
+        let format = if binary { FastrakFormat::Binary } else { FastrakFormat::Ascii };
+        let mut items = items;
+        items.push(1); // records end with CR LF, as every real configuration does
+        let settings = FastrakSettings { items, stylus_bytes, ..FastrakSettings::default() };
+        let make = || FastrakDecoder::new(format, settings.clone());
+        let mut dec = make().map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let events = feed_split(&mut dec, &garbage, &[cut]);
+        prop_assert!(no_non_finite(&events));
+        let record = encode::fastrak::FastrakRecord {
+            station: 4, status: b' ', position: [1.0, -2.0, 3.0], euler_deg: [10.0, 20.0, 30.0],
+            quaternion: [1.0, 0.0, 0.0, 0.0], stylus: true,
+        };
+        let one = encode::fastrak::encode_record(format, &settings, &record);
+        let mut bytes = garbage.clone();
+        for _ in 0..3 { bytes.extend(&one); }
+        let mut dec = make().map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let events = feed_split(&mut dec, &bytes, &[cut]);
+        let p = poses(&events);
+        prop_assert!(p.len() >= 3, "{:?}", events);
+        prop_assert!(p[p.len() - 3..].iter().all(|s| s.station == 4));
+    }
+
+    #[test]
     fn spaceball_finds_packets_after_garbage(
         garbage in proptest::collection::vec(any::<u8>(), 0..200),
         raw in proptest::array::uniform6(any::<i16>()),

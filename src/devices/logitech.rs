@@ -226,4 +226,28 @@ mod tests {
         assert_eq!(dropped(&events), 13);
         assert!((p[1].pose.position_m - Vec3::new(12.0, 34.0, 56.0) * 2.54e-5).length() < 1e-9);
     }
+
+    #[test]
+    fn garbage_inside_a_report() {
+        // A stray header byte inside a report cuts it short: it is dropped, the next is found.
+        let good = report(0, [1, 2, 3], [4, 5, 6]);
+        let mut stream = good[..7].to_vec();
+        stream.push(0x80);
+        stream.extend(&good);
+        let events = feed_all(&mut LogitechDecoder::new(), &stream);
+        assert_eq!(poses(&events).len(), 1, "{events:?}");
+        // The stray header began a report of its own that the real header cut short.
+        assert_eq!(dropped(&events), 8);
+        // A stray non-header byte cannot be seen (no checksum): that report decodes shifted and
+        // the byte left over is dropped; the report after it is exact again.
+        let mut stream = good[..7].to_vec();
+        stream.push(0x11);
+        stream.extend(&good[7..]);
+        stream.extend(&good);
+        let events = feed_all(&mut LogitechDecoder::new(), &stream);
+        let p = poses(&events);
+        assert_eq!(p.len(), 2, "{events:?}");
+        assert_eq!(dropped(&events), 1);
+        assert_eq!(p[1].raw_position, [1.0, 2.0, 3.0]);
+    }
 }
