@@ -59,13 +59,13 @@ pub struct Materials {
 pub fn materials(name: &str) -> Materials {
     let base = Materials {
         skin_mass_kg: 1.0,
-        stretch_omega_rad_per_s: 120.0,
+        stretch_omega_rad_per_s: 60.0,
         shear_fraction: 0.5,
         bending: 0.0,
         damping_per_s: 2.0,
         tissue_omega_rad_per_s: 40.0,
         tissue_damping_ratio: 0.3,
-        rest_shrink: 0.95,
+        rest_shrink: 1.0,
     };
     match name {
         "penguin" => Materials {
@@ -74,12 +74,12 @@ pub fn materials(name: &str) -> Materials {
         },
         "wombat" => Materials {
             skin_mass_kg: 1.5,
-            stretch_omega_rad_per_s: 110.0,
+            stretch_omega_rad_per_s: 55.0,
             ..base
         },
         "torso" => Materials {
             skin_mass_kg: 2.0,
-            stretch_omega_rad_per_s: 130.0,
+            stretch_omega_rad_per_s: 65.0,
             tissue_omega_rad_per_s: 45.0,
             ..base
         },

@@ -69,14 +69,14 @@ impl Default for SimulationDefaults {
             gravity_m_per_s2: Vec3::new(0.0, -9.81, 0.0),
             k_parallel: 0.0,
             k_perpendicular: 1.0,
-            epsilon_c_m: 0.002,
-            epsilon_r: 1e-4,
+            epsilon_c_m: 0.005,
+            epsilon_r: 1e-3,
             r_threshold_m: 1.0,
             epsilon_v: 1e-3,
             v_threshold_m_per_s: 1.0,
             min_step_s: 1e-4,
             max_step_s: 0.016,
-            euler_step_s: 0.002,
+            euler_step_s: 0.0005,
         }
     }
 }
