@@ -655,9 +655,9 @@ impl FrameWork for AppFrame<'_> {
         let state = &mut *self.state;
         state.reads_this_frame = 0;
         state.shown_time_s = sim_time_s;
-        if !state.simulation_on || state.model.is_none() {
-            state.posture_at(sim_time_s);
-        }
+        // The skeleton and shapes shown are those of the time the skin has reached, so the
+        // skin and what it wraps stay consistent when the simulation lags its target.
+        state.posture_at(sim_time_s);
         let head = state.head_physical(read);
         match eye_views(&state.calibration, &head, &state.view_settings) {
             Ok(views) => state.last_views = Some(views),

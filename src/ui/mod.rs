@@ -144,31 +144,39 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     let mut min_ms = t.min_step_s * 1e3;
     let mut max_ms = t.max_step_s * 1e3;
     let mut fixed_ms = t.fixed_step_s * 1e3;
-    ui.add(
-        egui::Slider::new(&mut t.position_tolerance, 1e-6..=1e-2)
-            .logarithmic(true)
-            .max_decimals(6)
-            .text("position tolerance ε_r"),
-    );
-    ui.add(
-        egui::Slider::new(&mut min_ms, 0.01..=5.0)
-            .logarithmic(true)
-            .text("min step (ms)"),
-    );
-    ui.add(
-        egui::Slider::new(&mut max_ms, 0.1..=40.0)
-            .logarithmic(true)
-            .text("max step (ms)"),
-    );
-    ui.add(
-        egui::Slider::new(&mut fixed_ms, 0.05..=10.0)
-            .logarithmic(true)
-            .text("fixed step (ms)"),
-    );
-    t.min_step_s = min_ms * 1e-3;
-    t.max_step_s = (max_ms * 1e-3).max(t.min_step_s);
-    t.fixed_step_s = fixed_ms * 1e-3;
-    if t != state.tolerances {
+    let mut changed = ui
+        .add(
+            egui::Slider::new(&mut t.position_tolerance, 1e-6..=1e-2)
+                .logarithmic(true)
+                .max_decimals(6)
+                .text("position tolerance ε_r"),
+        )
+        .changed();
+    changed |= ui
+        .add(
+            egui::Slider::new(&mut min_ms, 0.01..=5.0)
+                .logarithmic(true)
+                .text("min step (ms)"),
+        )
+        .changed();
+    changed |= ui
+        .add(
+            egui::Slider::new(&mut max_ms, 0.1..=40.0)
+                .logarithmic(true)
+                .text("max step (ms)"),
+        )
+        .changed();
+    changed |= ui
+        .add(
+            egui::Slider::new(&mut fixed_ms, 0.05..=10.0)
+                .logarithmic(true)
+                .text("fixed step (ms)"),
+        )
+        .changed();
+    if changed {
+        t.min_step_s = min_ms * 1e-3;
+        t.max_step_s = (max_ms * 1e-3).max(t.min_step_s);
+        t.fixed_step_s = fixed_ms * 1e-3;
         state.tolerances = t;
         state.queue_change(ParameterChange::Tolerances(t));
     }
