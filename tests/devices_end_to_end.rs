@@ -302,6 +302,7 @@ fn fake_spaceball_and_fastrak_on_ptys_survive_unplug_and_stall() {
     )
     .expect("hub");
     let mut live_events = Vec::new();
+    let t0 = Instant::now();
 
     // Both devices initialise (banner, status record) and stream through the hub.
     let snap = wait_until(&hub, "both devices running with data", |s| {
@@ -311,6 +312,10 @@ fn fake_spaceball_and_fastrak_on_ptys_survive_unplug_and_stall() {
             && Role::ALL.iter().all(|r| s.role(*r).at.is_some())
     });
     live_events.extend(hub.drain_events());
+    eprintln!(
+        "both devices initialised and streaming after {:?}",
+        t0.elapsed()
+    );
     let head = snap.role(Role::Head).pose.expect("head pose");
     let wand = snap.role(Role::Wand).pose.expect("wand pose");
     assert!(
@@ -334,10 +339,12 @@ fn fake_spaceball_and_fastrak_on_ptys_survive_unplug_and_stall() {
     );
 
     // Unplug the Spaceball: it is reported lost, its axes read zero, the FASTRAK carries on.
+    let t1 = Instant::now();
     ball.unplug();
     let snap = wait_until(&hub, "spaceball lost", |s| {
         s.devices[1].state == DeviceState::Lost
     });
+    eprintln!("unplug reported lost after {:?}", t1.elapsed());
     assert_eq!(snap.role(Role::Navigation).axes, [0.0; 6]);
     assert!(snap.devices[1].last_error.is_some());
     let head_samples = snap.devices[0].samples;
@@ -348,6 +355,7 @@ fn fake_spaceball_and_fastrak_on_ptys_survive_unplug_and_stall() {
 
     // Plug a Spaceball in again (a new pty behind the same path): the hub reopens it, reruns
     // the initialisation and reads the new device, without restarting anything.
+    let t2 = Instant::now();
     let ball2 = Fake::spawn(Kind::Spaceball(axes_b));
     swap_symlink(&dir.path().join("spaceball"), &ball2.slave_path);
     let snap = wait_until(&hub, "spaceball back", |s| {
@@ -355,6 +363,12 @@ fn fake_spaceball_and_fastrak_on_ptys_survive_unplug_and_stall() {
             && s.role(Role::Navigation).axes == expected_axes(axes_b)
     });
     assert!(snap.devices[1].reconnects >= 1);
+    eprintln!(
+        "replugged spaceball streaming again after {:?}; rates: fastrak {} /s, spaceball {} /s",
+        t2.elapsed(),
+        snap.devices[0].rate_hz,
+        snap.devices[1].rate_hz
+    );
     live_events.extend(hub.drain_events());
 
     // A stalled FASTRAK (open, silent) goes stale, the head keeps its last good pose, and
