@@ -54,6 +54,8 @@ pub struct ConstraintOutcome {
     pub max_correction_m: f32,
     /// Points moved.
     pub corrected: u32,
+    /// Free point with the largest correction, and the last shape that moved it.
+    pub worst: (u32, u32),
 }
 
 /// Inputs of a constraint pass.
@@ -135,7 +137,9 @@ impl Broadphase {
 
 /// Applies the constraints to a candidate state in place. `grid` must hold the full grid of the
 /// candidate positions and `normals` its normals. The free points of `x`, `v` and the grid are
-/// updated together.
+/// updated together. `only` restricts the pass to those free points (a re-check); the points
+/// moved are written to `touched`.
+#[allow(clippy::too_many_arguments)]
 pub fn enforce(
     input: &ConstraintInput<'_>,
     broad: &mut Broadphase,
@@ -143,8 +147,12 @@ pub fn enforce(
     normals: &[Vec<f32>; 3],
     x: &mut [f32],
     v: &mut [f32],
+    only: Option<&[u32]>,
+    touched: &mut Vec<u32>,
 ) -> ConstraintOutcome {
-    broad.update(input, grid);
+    if only.is_none() {
+        broad.update(input, grid);
+    }
     let m = input.around;
     let free = m * (input.along - 2);
     let shapes = input.shapes_end;
@@ -154,7 +162,16 @@ pub fn enforce(
     } else {
         0.0
     };
-    for f in 0..free {
+    touched.clear();
+    let n_points = only.map_or(free, |o| o.len());
+    for idx in 0..n_points {
+        let f = match only {
+            Some(list) => list[idx] as usize,
+            None => idx,
+        };
+        if f >= free {
+            continue;
+        }
         let count = broad.count[f];
         if count == 0 {
             continue;
@@ -168,7 +185,7 @@ pub fn enforce(
         let mut last_normal = Vec3::ZERO;
         let mut last_shape = usize::MAX;
         // Two rounds so a point pushed out of one muscle into an overlapping one is fixed too.
-        for _round in 0..2 {
+        for _round in 0..4 {
             let mut changed = false;
             let list: &[u8] = if count == ALL_SHAPES {
                 &[]
@@ -227,8 +244,12 @@ pub fn enforce(
             .max(d.x.abs())
             .max(d.y.abs())
             .max(d.z.abs());
-        out.max_correction_m = out.max_correction_m.max(d.length());
+        if d.length() > out.max_correction_m {
+            out.max_correction_m = d.length();
+            out.worst = (f as u32, last_shape as u32);
+        }
         out.corrected += 1;
+        touched.push(f as u32);
         x[f] = p1.x;
         x[free + f] = p1.y;
         x[2 * free + f] = p1.z;
@@ -290,4 +311,38 @@ pub fn max_depth_m(
         }
     }
     worst
+}
+
+/// The free points within one grid step (around or along, periodic around) of `points`, each
+/// once, into `out` (`flags` is scratch of one byte per free point).
+pub fn neighbourhood(
+    around: usize,
+    free: usize,
+    points: &[u32],
+    flags: &mut Vec<u8>,
+    out: &mut Vec<u32>,
+) {
+    flags.clear();
+    flags.resize(free, 0);
+    out.clear();
+    let m = around;
+    for &p in points {
+        let f = p as usize;
+        let (i, row) = (f % m, f / m);
+        let left = row * m + (i + m - 1) % m;
+        let right = row * m + (i + 1) % m;
+        let mut add = |g: usize| {
+            if g < free && flags[g] == 0 {
+                flags[g] = 1;
+                out.push(g as u32);
+            }
+        };
+        add(f);
+        add(left);
+        add(right);
+        if f >= m {
+            add(f - m);
+        }
+        add(f + m);
+    }
 }

@@ -87,6 +87,12 @@ struct Work {
     checkpoint_x: Vec<f32>,
     checkpoint_v: Vec<f32>,
     checkpoint_t_s: f64,
+    checkpoint_step_s: f64,
+    touched: Vec<u32>,
+    recheck: Vec<u32>,
+    flags: Vec<u8>,
+    /// `(t, h, correction)` of the last constraint rejection (for root bracketing).
+    last_constraint_reject: Option<(f64, f64, f32)>,
 }
 
 /// The elastic surface layer model of one character.
@@ -305,6 +311,7 @@ impl SurfaceModel {
             self.work.checkpoint_x.clone_from(&self.core.x);
             self.work.checkpoint_v.clone_from(&self.core.v);
             self.work.checkpoint_t_s = self.core.t_s;
+            self.work.checkpoint_step_s = self.core.step_s;
         }
     }
 
@@ -313,13 +320,15 @@ impl SurfaceModel {
             self.core.x.clone_from(&self.work.checkpoint_x);
             self.core.v.clone_from(&self.work.checkpoint_v);
             self.core.t_s = self.work.checkpoint_t_s;
+            self.core.step_s = self.work.checkpoint_step_s;
         } else {
             // No checkpoint at this resolution: back to rest at the neutral posture.
             let rest = Core::rest_state(&self.core);
             self.core.x = rest;
             self.core.v.iter_mut().for_each(|v| *v = 0.0);
+            self.core.step_s = self.core.tolerances.min_step_s;
         }
-        self.core.step_s = self.core.tolerances.min_step_s;
+        self.work.last_constraint_reject = None;
         self.work.start_valid = false;
         self.work.broad.invalidate();
     }
@@ -423,25 +432,82 @@ impl SurfaceModel {
             k_perpendicular: core.k_perpendicular,
             max_speed_m_per_s: max_speed2.sqrt(),
         };
-        let outcome = constraints::enforce(
+        let mut outcome = constraints::enforce(
             &input,
             &mut w.broad,
             &mut w.force.grid,
             &w.normals,
             &mut w.x_new,
             &mut w.v_new,
+            None,
+            &mut w.touched,
         );
+        let mut passes = 0;
+        let mut last_corrected = outcome.corrected;
+        while last_corrected > 0 && passes < 4 {
+            // Corrections turn their neighbours' normals, which moves those neighbours' fat
+            // points: further passes over the corrected points and their neighbours with the
+            // new normals, until nothing moves (at most 4).
+            passes += 1;
+            forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
+            constraints::neighbourhood(core.around, free, &w.touched, &mut w.flags, &mut w.recheck);
+            let second = constraints::enforce(
+                &input,
+                &mut w.broad,
+                &mut w.force.grid,
+                &w.normals,
+                &mut w.x_new,
+                &mut w.v_new,
+                Some(&w.recheck),
+                &mut w.touched,
+            );
+            last_corrected = second.corrected;
+            outcome.max_component_m = outcome.max_component_m.max(second.max_component_m);
+            if second.max_correction_m > outcome.max_correction_m {
+                outcome.max_correction_m = second.max_correction_m;
+                outcome.worst = second.worst;
+            }
+        }
         if let (Some(start), Some(c)) = (c_start, clock) {
             report.phases.constraints += c.now().saturating_sub(start);
         }
         let at_min = h_s <= core.tolerances.min_step_s * (1.0 + 1e-9);
-        if outcome.max_component_m > core.epsilon_c_m && !at_min {
+        // Root bracketing assumes the correction shrinks with the step. When a retry at half
+        // the step or less still needs ≥ 70 % of the previous correction, the penetration does
+        // not come from this step's motion (e.g. a neighbour's correction turned the normal
+        // that offsets the fat point): shrinking further cannot help, so accept (forced).
+        let not_step_driven = match w.last_constraint_reject {
+            Some((t_prev, h_prev, c_prev)) => {
+                t_prev == t0 && h_s < h_prev && outcome.max_component_m >= 0.7 * c_prev
+            }
+            None => false,
+        };
+        if outcome.max_component_m > core.epsilon_c_m && !at_min && !not_step_driven {
+            w.last_constraint_reject = Some((t0, h_s, outcome.max_component_m));
             // False position on [0, h]: the correction is about proportional to h.
             let ratio = f64::from(core.epsilon_c_m / outcome.max_component_m);
             let h_c = (h_s * 0.8 * ratio)
                 .min(0.5 * h_s)
                 .max(core.tolerances.min_step_s);
             return Attempt::ConstraintRejected { retry_s: h_c };
+        }
+        w.last_constraint_reject = None;
+        if std::env::var_os("LEMAN_DEBUG_CONSTRAINTS").is_some() && outcome.max_correction_m > 0.004
+        {
+            let (f, s) = outcome.worst;
+            eprintln!(
+                "t {:.4} h {:.5} corr {:.4} point ({}, {}) shape {} {:?}",
+                t0,
+                h_s,
+                outcome.max_correction_m,
+                f as usize % core.around,
+                f as usize / core.around + 1,
+                s,
+                core.character
+                    .shapes
+                    .get(s as usize)
+                    .map(|s| (&s.name, s.primitive))
+            );
         }
         Attempt::Accepted {
             next_s: p.next_step_s,
@@ -807,6 +873,7 @@ impl DeformationModel for SurfaceModel {
         if !self.core.kind.is_adaptive() {
             self.core.step_s = self.core.tolerances.fixed_step_s;
         }
+        self.save_checkpoint();
         report.time_s = self.core.t_s;
         report.reached_target = self.core.t_s >= target_time_s - 1e-9;
         if let (Some(b), Some(c)) = (begin, clock) {
@@ -1010,6 +1077,7 @@ impl DeformationModel for SurfaceModel {
         }
         self.core = core.clone();
         self.work.start_valid = false;
+        self.work.last_constraint_reject = None;
         self.work.broad.invalidate();
         self.work.checkpoint_x.clear();
         self.save_checkpoint();

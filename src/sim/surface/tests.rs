@@ -1,1 +1,417 @@
+use super::*;
+use crate::character::examples;
+use crate::sim::{MaxAttempts, MotionPoses, Unlimited};
 
+fn model(name: &str, res: u32, kind: IntegratorKind) -> SurfaceModel {
+    let c = examples::build(name, res, res).expect("example exists");
+    SurfaceModel::new(c, kind).expect("example simulates")
+}
+
+/// Materials experiment: not a test, run by hand with `--ignored --nocapture`.
+#[test]
+#[ignore]
+fn materials_experiment() {
+    let omega_scale: f32 = std::env::var("OMEGA_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0);
+    let tissue_scale: f32 = std::env::var("TISSUE_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0);
+    let metric_scale: f32 = std::env::var("METRIC_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0);
+    let eps_r: f64 = std::env::var("EPS_R")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1e-4);
+    for name in ["penguin", "wombat", "torso", "arm"] {
+        let mut m = model(name, 32, IntegratorKind::Verlet);
+        let eta = m.core.materials.eta.clone();
+        for c in 0..3 {
+            for (e, e0) in m.core.materials.eta[c].iter_mut().zip(&eta[c]) {
+                *e = e0 * omega_scale * omega_scale;
+            }
+        }
+        for ks in &mut m.core.springs.ks {
+            *ks *= tissue_scale * tissue_scale;
+        }
+        for kd in &mut m.core.springs.kd {
+            *kd *= tissue_scale;
+        }
+        m.apply(&ParameterChange::RestMetricScale(
+            Selection::All,
+            metric_scale,
+        ))
+        .expect("accepted");
+        let eps_c: f32 = std::env::var("EPS_C")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0.002);
+        m.apply(&ParameterChange::ConstraintTolerance(eps_c))
+            .expect("accepted");
+        let mut t = m.tolerances();
+        t.position_tolerance = eps_r;
+        m.apply(&ParameterChange::Tolerances(t)).expect("accepted");
+        let motion = m.character().motions[0].clone();
+        let mut poses = MotionPoses(&motion);
+        let r = m.advance(2.0, &mut poses, &mut Unlimited, None);
+        eprintln!(
+            "{name}: steps {} rej {} (constraint {}) forced {} h [{:.2}, {:.2}] ms pen {:.2} mm nonfinite {}",
+            r.steps,
+            r.rejected_steps,
+            r.constraint_rejections,
+            r.forced_steps,
+            r.min_step_s * 1e3,
+            r.max_step_s * 1e3,
+            r.max_penetration_m * 1e3,
+            r.nonfinite_events
+        );
+    }
+}
+
+fn all_finite(m: &SurfaceModel) -> bool {
+    m.core.x.iter().chain(&m.core.v).all(|v| v.is_finite())
+}
+
+#[test]
+fn no_fat_point_deeper_than_epsilon_c_after_any_accepted_step() {
+    for name in ["arm", "penguin", "wombat"] {
+        let mut m = model(name, 16, IntegratorKind::Verlet);
+        let motion = m.character().motions[0].clone();
+        let mut poses = MotionPoses(&motion);
+        let eps_c = m.epsilon_c_m();
+        let mut steps = 0;
+        let mut worst = 0.0f32;
+        while m.time_s() < 1.2 {
+            let r = m.advance(1.2, &mut poses, &mut MaxAttempts(1), None);
+            if r.steps > 0 {
+                steps += 1;
+                let depth = m.max_depth_m();
+                worst = worst.max(depth);
+                assert!(
+                    depth <= eps_c,
+                    "{name}: depth {depth} m > ε_c {eps_c} m at t = {}",
+                    m.time_s()
+                );
+            }
+        }
+        assert!(steps > 50, "{name}: only {steps} steps");
+        assert!(all_finite(&m));
+        eprintln!("{name}: {steps} steps, worst depth after a step {worst} m");
+    }
+}
+
+#[test]
+fn skin_follows_the_skeleton_through_a_motion() {
+    // The arm bends its elbow 0° → 90° over the first second: the forearm's skin must go
+    // with the forearm bone.
+    let mut m = model("arm", 16, IntegratorKind::Verlet);
+    let c = m.character().clone();
+    let motion = c.motion("bend").expect("arm has a bend motion").clone();
+    let elbow = c.skeleton.joint_by_name("elbow").expect("elbow joint");
+    let wrist = c.skin.top_joint;
+    let (mm, nn) = (c.skin.around as usize, c.skin.along as usize);
+    let forearm_centroid = |m: &SurfaceModel| {
+        let p = m.positions_m();
+        // Rows in the outer half of the forearm (between 3/4 of the arm and the wrist ring).
+        let rows = (3 * nn / 4)..(nn - 1);
+        let mut sum = Vec3::ZERO;
+        let mut count = 0.0;
+        for j in rows {
+            for i in 0..mm {
+                sum += p[j * mm + i];
+                count += 1.0;
+            }
+        }
+        sum / count
+    };
+    let mut poses = MotionPoses(&motion);
+    let start = forearm_centroid(&m);
+    for t in [0.25, 0.5, 0.75, 1.0] {
+        m.advance(t, &mut poses, &mut Unlimited, None);
+        let pose = c.skeleton.forward_kinematics(&motion.posture_at(t as f32));
+        let e = pose.world_from(elbow).position_m;
+        let w = pose.world_from(wrist).position_m;
+        // The forearm section's centre lies on the bone segment, 5/8 of the way to the wrist.
+        let expected = e.lerp(w, 0.625);
+        let got = forearm_centroid(&m);
+        assert!(
+            (got - expected).length() < 0.04,
+            "t = {t}: forearm skin centroid {got} is {} m from the bone point {expected}",
+            (got - expected).length()
+        );
+    }
+    // And it really moved (the elbow is at 90° at t = 1 s).
+    assert!((forearm_centroid(&m) - start).length() > 0.1);
+}
+
+#[test]
+fn tissue_springs_only_pull() {
+    // One free row of 3 points, no elasticity, gravity or damping; one spring on point 0
+    // anchored at the origin with rest length 0.1 m.
+    let (m, n) = (3usize, 3usize);
+    let materials = Materials {
+        eta: [vec![0.0; 9], vec![0.0; 9], vec![0.0; 9]],
+        rest_metric: [vec![1.0; 9], vec![0.0; 9], vec![1.0; 9]],
+        xi: [vec![0.0; 9], vec![0.0; 9], vec![0.0; 9]],
+        rest_curvature: [vec![0.0; 9], vec![0.0; 9], vec![0.0; 9]],
+        has_bending: false,
+        mass_kg: vec![0.5; 3],
+        inv_mass: vec![2.0; 3],
+        damping_per_mass: vec![0.0; 3],
+        damping: vec![0.0; 3],
+        fat_m: vec![0.0; 3],
+        gravity: Vec3::ZERO,
+    };
+    let springs = Springs {
+        point: vec![0],
+        source: vec![0],
+        ks: vec![100.0],
+        kd: vec![5.0],
+        rest_m: vec![0.1],
+        shape: vec![0],
+        anchor_rest_m: vec![Vec3::ZERO],
+    };
+    let zeros = || [vec![0.0; 2 * m], vec![0.0; 2 * m], vec![0.0; 2 * m]];
+    let kin = StepKinematics {
+        t0_s: 0.0,
+        h_s: 0.01,
+        rings_start: zeros(),
+        rings_end: zeros(),
+        anchors_start: [vec![0.0], vec![0.0], vec![0.0]],
+        anchors_end: [vec![0.0], vec![0.0], vec![0.0]],
+    };
+    let input = ForceInput {
+        around: m,
+        along: n,
+        materials: &materials,
+        springs: &springs,
+        kin: &kin,
+    };
+    let mut scratch = ForceScratch::default();
+    let accel = |dist: f32, speed_out: f32, scratch: &mut ForceScratch| {
+        // Point 0 on +X at `dist`, moving along +X at `speed_out`.
+        let mut x = vec![0.0f32; 9];
+        x[0] = dist;
+        let mut v = vec![0.0f32; 9];
+        v[0] = speed_out;
+        let mut a = vec![0.0f32; 9];
+        forces::position_accel(&input, scratch, 0.0, &x, &mut a);
+        forces::add_velocity_accel(&input, scratch, &v, &mut a);
+        Vec3::new(a[0], a[3], a[6])
+    };
+    for dist in [0.02f32, 0.05, 0.099] {
+        for speed in [-50.0f32, 0.0, 50.0] {
+            assert_eq!(
+                accel(dist, speed, &mut scratch),
+                Vec3::ZERO,
+                "slack at {dist}"
+            );
+        }
+    }
+    for dist in [0.11f32, 0.2, 0.5] {
+        for speed in [-1000.0f32, -1.0, 0.0, 1.0, 1000.0] {
+            let a = accel(dist, speed, &mut scratch);
+            assert!(a.x <= 0.0, "pushes away at {dist} m, {speed} m/s: {a}");
+            assert!(a.y == 0.0 && a.z == 0.0);
+        }
+        // At rest it pulls with k_s (|l| − l⁰) / m.
+        let a = accel(dist, 0.0, &mut scratch);
+        assert!((a.x + 100.0 * (dist - 0.1) * 2.0).abs() < 1e-3, "{a}");
+        // Approaching fast: damping cancels the pull but never turns it into a push.
+        assert_eq!(accel(dist, -1000.0, &mut scratch), Vec3::ZERO);
+    }
+}
+
+#[test]
+fn guard_restores_the_last_good_state_after_an_injected_nan() {
+    let mut m = model("penguin", 16, IntegratorKind::Verlet);
+    let motion = m.character().motions[0].clone();
+    let mut poses = MotionPoses(&motion);
+    m.advance(0.2, &mut poses, &mut Unlimited, None);
+    let good = m.core.x.clone();
+    let t_good = m.time_s();
+    m.core.x[7] = f32::NAN;
+    m.core.v[3] = f32::INFINITY;
+    let r = m.advance(0.4, &mut poses, &mut Unlimited, None);
+    assert!(r.nonfinite_events >= 1, "{r:?}");
+    assert!(all_finite(&m));
+    assert!(r.reached_target, "it carries on from the restored state");
+    // The restored state was the last good one: a fresh model run to t_good from the
+    // restored state matches one that never saw the NaN.
+    let mut clean = model("penguin", 16, IntegratorKind::Verlet);
+    clean.advance(0.2, &mut poses, &mut Unlimited, None);
+    assert_eq!(clean.core.x, good);
+    assert_eq!(clean.time_s(), t_good);
+    clean.advance(0.4, &mut poses, &mut Unlimited, None);
+    assert_eq!(clean.core.x, m.core.x);
+    // A mesh never carries non-finite values.
+    let mut mesh = SurfaceMesh::default();
+    m.surface_mesh_into(&mut mesh);
+    assert!(mesh.positions_m.iter().all(|p| p.is_finite()));
+}
+
+#[test]
+fn guard_rejects_exploding_steps() {
+    // Absurdly stiff skin with a huge fixed step: explicit Euler explodes; the guard must
+    // keep every committed state finite and report the events.
+    let mut m = model("penguin", 16, IntegratorKind::Euler);
+    m.apply(&ParameterChange::Stretch(Selection::All, [1e9, 1e9, 1e9]))
+        .expect("accepted");
+    let mut t = m.tolerances();
+    t.fixed_step_s = 0.01;
+    m.apply(&ParameterChange::Tolerances(t)).expect("accepted");
+    let motion = m.character().motions[0].clone();
+    let mut poses = MotionPoses(&motion);
+    let r = m.advance(0.5, &mut poses, &mut MaxAttempts(200), None);
+    assert!(r.nonfinite_events > 0, "{r:?}");
+    assert!(all_finite(&m));
+}
+
+#[test]
+fn snapshot_and_restore_continue_identically() {
+    let mut m = model("wombat", 16, IntegratorKind::Verlet);
+    let motion = m.character().motions[0].clone();
+    let mut poses = MotionPoses(&motion);
+    m.advance(0.3, &mut poses, &mut Unlimited, None);
+    let snap = m.snapshot();
+    m.advance(0.6, &mut poses, &mut Unlimited, None);
+    let first = (m.core.x.clone(), m.core.v.clone(), m.time_s());
+    m.restore(&snap).expect("accepted");
+    assert_eq!(m.time_s(), snap.time_s);
+    m.advance(0.6, &mut poses, &mut Unlimited, None);
+    assert_eq!((m.core.x.clone(), m.core.v.clone(), m.time_s()), first);
+    // A snapshot from another character is refused and changes nothing.
+    let other = model("penguin", 16, IntegratorKind::Verlet).snapshot();
+    assert!(m.restore(&other).is_err());
+    assert_eq!(m.time_s(), first.2);
+}
+
+#[test]
+fn integrators_switch_at_run_time_and_all_follow_the_motion() {
+    let mut m = model("arm", 16, IntegratorKind::Verlet);
+    let motion = m.character().motions[0].clone();
+    let mut poses = MotionPoses(&motion);
+    let mut t = 0.0;
+    for kind in [
+        IntegratorKind::Euler,
+        IntegratorKind::Rk2,
+        IntegratorKind::Rk4,
+        IntegratorKind::Verlet,
+    ] {
+        m.apply(&ParameterChange::Integrator(kind))
+            .expect("accepted");
+        t += 0.15;
+        let r = m.advance(t, &mut poses, &mut Unlimited, None);
+        assert!(r.reached_target && r.steps > 0, "{kind:?}: {r:?}");
+        assert!(all_finite(&m), "{kind:?}");
+        if !kind.is_adaptive() {
+            assert!(r.max_step_s <= m.tolerances().fixed_step_s * 1.000_001);
+        }
+    }
+}
+
+#[test]
+fn mesh_has_outward_normals_and_every_triangle() {
+    let m = model("torso", 16, IntegratorKind::Verlet);
+    let mut mesh = SurfaceMesh::default();
+    m.surface_mesh_into(&mut mesh);
+    let (mm, nn) = (16usize, 16usize);
+    assert_eq!(mesh.positions_m.len(), mm * nn);
+    assert_eq!(mesh.indices.len(), 6 * mm * (nn - 1));
+    assert!(mesh.indices.iter().all(|i| (*i as usize) < mm * nn));
+    let c = m.character();
+    let mut outward = 0;
+    for j in 1..nn - 1 {
+        let centre = c.skin.ring_center(&mesh.positions_m, j as u32);
+        for i in 0..mm {
+            let k = j * mm + i;
+            if mesh.normals[k].dot(mesh.positions_m[k] - centre) > 0.0 {
+                outward += 1;
+            }
+        }
+    }
+    assert!(outward as f32 > 0.9 * (mm * (nn - 2)) as f32, "{outward}");
+    // Triangles wind counter-clockwise seen from outside: their normal agrees with the vertex
+    // normals.
+    let mut agree = 0;
+    for t in mesh.indices.chunks(3) {
+        let [a, b, cc] = [t[0], t[1], t[2]].map(|i| mesh.positions_m[i as usize]);
+        let tn = (b - a).cross(cc - a);
+        if tn.dot(mesh.normals[t[0] as usize]) > 0.0 {
+            agree += 1;
+        }
+    }
+    assert!(agree as f32 > 0.9 * (mesh.indices.len() / 3) as f32);
+}
+
+#[test]
+fn bad_parameters_are_refused_and_change_nothing() {
+    let mut m = model("penguin", 16, IntegratorKind::Verlet);
+    let before = m.core.materials.clone();
+    assert!(
+        m.apply(&ParameterChange::Mass(Selection::All, f32::NAN))
+            .is_err()
+    );
+    assert!(
+        m.apply(&ParameterChange::Mass(Selection::All, 0.0))
+            .is_err()
+    );
+    assert!(
+        m.apply(&ParameterChange::Fat(Selection::Some(vec![99_999]), 0.01))
+            .is_err()
+    );
+    assert!(
+        m.apply(&ParameterChange::Damping(Selection::All, -1.0))
+            .is_err()
+    );
+    assert_eq!(m.core.materials, before);
+    m.apply(&ParameterChange::Fat(Selection::Some(vec![20]), 0.03))
+        .expect("accepted");
+    assert_eq!(m.core.materials.fat_m[20 - 16], 0.03);
+}
+
+#[test]
+fn resolution_changes_keep_the_shape_and_keep_simulating() {
+    let mut m = model("torso", 16, IntegratorKind::Verlet);
+    let motion = m.character().motions[0].clone();
+    let mut poses = MotionPoses(&motion);
+    m.advance(0.1, &mut poses, &mut Unlimited, None);
+    let before = m.positions_m();
+    let mean = |p: &[Vec3]| p.iter().copied().sum::<Vec3>() / p.len() as f32;
+    m.set_resolution(24, 20).expect("accepted");
+    assert_eq!(m.resolution(), (24, 20));
+    assert_eq!(m.point_count(), 480);
+    let after = m.positions_m();
+    assert!((mean(&before) - mean(&after)).length() < 0.02);
+    let r = m.advance(0.3, &mut poses, &mut Unlimited, None);
+    assert!(r.reached_target && all_finite(&m));
+    assert!(m.set_resolution(2, 20).is_err());
+}
+
+/// A clock that moves 1 µs every time it is read.
+struct TickingClock(std::sync::atomic::AtomicU64);
+
+impl Clock for TickingClock {
+    fn now(&self) -> Duration {
+        Duration::from_micros(self.0.fetch_add(1, std::sync::atomic::Ordering::SeqCst))
+    }
+}
+
+#[test]
+fn phase_times_come_from_the_clock_passed_in() {
+    let mut m = model("penguin", 16, IntegratorKind::Verlet);
+    let motion = m.character().motions[0].clone();
+    let mut poses = MotionPoses(&motion);
+    let r = m.advance(0.1, &mut poses, &mut Unlimited, None);
+    assert_eq!(r.phases.total(), Duration::ZERO, "no clock, no timing");
+    let clock = TickingClock(Default::default());
+    let r = m.advance(0.2, &mut poses, &mut Unlimited, Some(&clock));
+    assert!(r.phases.force > Duration::ZERO && r.phases.constraints > Duration::ZERO);
+    // Every interval is measured on the same clock: the phases add up to the whole call.
+    let reads = clock.0.load(std::sync::atomic::Ordering::SeqCst);
+    assert!(r.phases.total() <= Duration::from_micros(reads));
+}
