@@ -60,7 +60,7 @@ fn headless_replay_of_a_fastrak_session_writes_frames_and_a_frame_log() {
             "--size",
             "320x180",
         ])
-        .args(["--every", "20", "--max-frames", "60", "--frames"])
+        .args(["--every", "20", "--frame-count", "60", "--frames"])
         .arg(&frames)
         .arg(&session)
         .output()

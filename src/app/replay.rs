@@ -40,8 +40,9 @@ pub struct ReplaySettings {
     pub png_every: u32,
     /// Where the JSON-lines log goes (none: not written).
     pub log_path: Option<PathBuf>,
-    /// Stop after this many frames (none: the whole session).
-    pub max_frames: Option<u64>,
+    /// Run exactly this many frames (none: the session's length). Past the session's end the
+    /// devices keep their last samples.
+    pub frame_count: Option<u64>,
     /// Simulate the skin.
     pub simulate: bool,
 }
@@ -56,7 +57,7 @@ impl Default for ReplaySettings {
             frames_dir: None,
             png_every: 1,
             log_path: None,
-            max_frames: None,
+            frame_count: None,
             simulate: true,
         }
     }
@@ -130,7 +131,7 @@ pub fn replay_headless(
     // Offline pacing: keep the character's own resolution.
     let frames = {
         let n = (duration.as_secs_f64() / settings.frame_period.as_secs_f64()).floor() as u64 + 1;
-        settings.max_frames.map_or(n, |m| m.min(n))
+        settings.frame_count.unwrap_or(n)
     };
 
     if let Some(dir) = &settings.frames_dir {

@@ -45,9 +45,10 @@ pub struct Args {
     /// Simulated seconds per real second (1 = real time, lower = slow motion).
     #[arg(long, default_value_t = 1.0)]
     pub ratio: f64,
-    /// Stop after this many frames.
+    /// Run exactly this many frames (default: the session's length; past its end the devices
+    /// keep their last samples).
     #[arg(long)]
-    pub max_frames: Option<u64>,
+    pub frame_count: Option<u64>,
     /// Do not simulate the skin.
     #[arg(long)]
     pub no_sim: bool,
@@ -74,6 +75,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             replay: Some(session),
             profile: None,
             ratio: args.ratio,
+            adapt: false,
+            log: args.log.clone(),
         });
     }
     let log = args
@@ -91,7 +94,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frames_dir: args.frames.clone(),
         png_every: args.every.max(1),
         log_path: log.clone(),
-        max_frames: args.max_frames,
+        frame_count: args.frame_count,
         simulate: !args.no_sim,
     };
     let model = setup::surface_model(&character, IntegratorKind::Verlet);

@@ -43,6 +43,12 @@ pub struct Args {
     /// Window size, WIDTHxHEIGHT.
     #[arg(long)]
     pub size: Option<String>,
+    /// Write the per-frame log (JSON lines) to this file when the window closes.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Lower and raise the skin resolution to hold the sim/real ratio.
+    #[arg(long)]
+    pub adapt: bool,
 }
 
 /// What the window needs.
@@ -59,6 +65,10 @@ pub struct WindowSetup {
     pub profile: Option<Profile>,
     /// Sim/real ratio.
     pub ratio: f64,
+    /// Adapt the skin resolution.
+    pub adapt: bool,
+    /// Where to write the frame log at exit.
+    pub log: Option<PathBuf>,
 }
 
 /// Runs `leman run`.
@@ -85,6 +95,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             replay: None,
             profile,
             ratio: args.ratio,
+            adapt: args.adapt,
+            log: args.log.clone(),
         },
         size,
         args.quit_after_frames,
@@ -108,6 +120,8 @@ fn run_window_sized(
         replay,
         profile,
         ratio,
+        adapt,
+        log,
     } = setup;
     let model = setup::surface_model(&character, IntegratorKind::Verlet);
     if let Err(e) = &model {
@@ -130,6 +144,7 @@ fn run_window_sized(
     let config = SchedulerConfig {
         sim_per_real: ratio,
         pacing: Pacing::Live,
+        adapt,
         ..SchedulerConfig::default()
     };
     let scheduler = Scheduler::new(config, 0.0)?;
@@ -147,6 +162,7 @@ fn run_window_sized(
         Box::new(move |cc| {
             let mut app = WorkstationApp::new(cc, state);
             app.quit_after_frames = quit_after_frames;
+            app.log_path = log;
             if let Some(clock) = replay_clock {
                 app.replay_clock = Some((clock, RealClock::new()));
             }

@@ -210,7 +210,10 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         state.scheduler.set_adapt(adapt);
     }
     if let Some(r) = &state.last_record {
-        let held = if r.ratio_held {
+        let window = state.scheduler.config().ratio_window_frames as u64;
+        let held = if r.frame < window {
+            "measuring"
+        } else if r.ratio_held {
             "held"
         } else {
             "NOT held: machine too slow"

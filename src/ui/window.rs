@@ -22,6 +22,9 @@ pub struct WorkstationApp {
     pub quit_after_frames: Option<u64>,
     /// When replaying in the window: the session clock and the real clock it follows.
     pub replay_clock: Option<(VirtualClock, RealClock)>,
+    /// Write the per-frame log (JSON lines) here when the window closes.
+    pub log_path: Option<std::path::PathBuf>,
+    records: Vec<crate::app::scheduler::FrameRecord>,
     frames: u64,
 }
 
@@ -62,6 +65,8 @@ impl WorkstationApp {
             pointer_inside: false,
             quit_after_frames: None,
             replay_clock: None,
+            log_path: None,
+            records: Vec::new(),
             frames: 0,
         }
     }
@@ -141,7 +146,10 @@ impl WorkstationApp {
         if let Some((session, real)) = &self.replay_clock {
             session.set(real.now());
         }
-        self.state.run_frame(&self.clock, renderer);
+        let record = self.state.run_frame(&self.clock, renderer);
+        if self.log_path.is_some() {
+            self.records.push(record);
+        }
         self.frames += 1;
         let (Some(rs), Some(target)) = (frame.wgpu_render_state(), renderer.target()) else {
             return;
@@ -197,5 +205,18 @@ impl eframe::App for WorkstationApp {
             ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
         }
         ui.ctx().request_repaint();
+    }
+
+    fn on_exit(&mut self) {
+        if let Some(path) = &self.log_path {
+            match crate::app::replay::write_log(path, &self.records) {
+                Ok(()) => eprintln!(
+                    "frame log: {} frames in {}",
+                    self.records.len(),
+                    path.display()
+                ),
+                Err(e) => eprintln!("error: {e}"),
+            }
+        }
     }
 }
