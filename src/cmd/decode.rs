@@ -2,9 +2,9 @@
 //! recorded session through its own decoder, and prints one event per line.
 
 use anyhow::{Context, bail};
+use leman::clock::{Clock, RealClock};
 use leman::devices::decoder::Decoder;
 use leman::devices::fastrak::{FastrakSettings, LengthUnit};
-use leman::devices::fuzz_harness::merge_drops;
 use leman::devices::opentrack::DATAGRAM_LEN;
 use leman::devices::profile::DeviceKind;
 use leman::devices::protocol::{DecoderSettings, Framing, Protocol, decoder_with_settings};
@@ -13,6 +13,7 @@ use leman::devices::session::{Record, Session};
 use leman::devices::spacemouse_hid::split_length_prefixed;
 use std::io::Write;
 use std::path::PathBuf;
+use std::time::Duration;
 
 /// Arguments of `leman decode`.
 #[derive(Debug, Default, clap::Args)]
@@ -37,11 +38,15 @@ pub struct Args {
     /// Width of the FASTRAK stylus item (16): 1 or 2 bytes.
     #[arg(long, default_value_t = 2)]
     pub stylus_bytes: u8,
-    /// Feed a raw stream capture in chunks of this many bytes (default: all at once) to
+    /// Feed a raw stream capture in chunks of this many bytes (default 65536) to
     /// reproduce fragmented reads; the output does not depend on it (consecutive drops are
     /// merged into one `dropped` event).
     #[arg(long)]
     pub chunk: Option<usize>,
+    /// Print to stderr how many bytes and events there were and how long decoding alone took
+    /// (raw captures only; printing is not counted).
+    #[arg(long)]
+    pub stats: bool,
 }
 
 fn parse_unit(s: &str) -> Result<LengthUnit, String> {
@@ -140,36 +145,69 @@ fn decode_raw<W: Write>(args: &Args, bytes: &[u8], printer: &mut Printer<W>) -> 
     };
     let mut decoder = decoder_with_settings(protocol, &settings)
         .with_context(|| format!("bad decoder settings for {protocol}"))?;
-    let mut events = Vec::new();
-    match (protocol, protocol.framing()) {
+    let (pieces, trailing): (Vec<&[u8]>, usize) = match (protocol, protocol.framing()) {
         (Protocol::SpacemouseHid, _) => {
             let (reports, trailing) = split_length_prefixed(bytes);
-            for report in reports {
-                decoder.feed(report, &mut events);
-            }
             if trailing > 0 {
-                events.push(DeviceEvent::Dropped { bytes: trailing });
                 tracing::warn!(
                     "{}: last {trailing} bytes do not form a whole length-prefixed report",
                     args.file.display()
                 );
             }
+            (reports, trailing)
         }
-        (_, Framing::Message) => {
-            // OpenTrack: consecutive datagrams; a short tail is fed as one (and rejected).
-            for datagram in bytes.chunks(DATAGRAM_LEN) {
-                decoder.feed(datagram, &mut events);
-            }
-        }
+        // OpenTrack: consecutive datagrams; a short tail is fed as one (and rejected).
+        (_, Framing::Message) => (bytes.chunks(DATAGRAM_LEN).collect(), 0),
         (_, Framing::Stream) => {
-            let chunk = args.chunk.unwrap_or(bytes.len()).max(1);
-            for piece in bytes.chunks(chunk) {
-                decoder.feed(piece, &mut events);
-            }
-            truncated_at_end(decoder.as_ref(), &mut events);
+            let chunk = args.chunk.unwrap_or(64 * 1024).max(1);
+            (bytes.chunks(chunk).collect(), 0)
         }
+    };
+    // Events are printed read by read (memory stays bounded); consecutive drops are merged
+    // across reads so the output does not depend on the chunking.
+    let mut events = Vec::new();
+    let mut held_drop = 0usize;
+    let clock = RealClock::new();
+    let mut decode_time = Duration::ZERO;
+    let mut event_count = 0usize;
+    for piece in pieces {
+        events.clear();
+        let start = clock.now();
+        decoder.feed(piece, &mut events);
+        decode_time += clock.now().saturating_sub(start);
+        event_count += events.len();
+        let mut merged = Vec::with_capacity(events.len());
+        for e in events.drain(..) {
+            match e {
+                DeviceEvent::Dropped { bytes } => held_drop += bytes,
+                other => {
+                    if held_drop > 0 {
+                        merged.push(DeviceEvent::Dropped { bytes: held_drop });
+                        held_drop = 0;
+                    }
+                    merged.push(other);
+                }
+            }
+        }
+        printer.print(&merged, None)?;
     }
-    printer.print(&merge_drops(events), None)?;
+    held_drop += trailing + decoder.pending();
+    if held_drop > 0 {
+        printer.print(&[DeviceEvent::Dropped { bytes: held_drop }], None)?;
+    }
+    if args.stats {
+        let secs = decode_time.as_secs_f64();
+        eprintln!(
+            "{protocol}: {} bytes -> {event_count} events (before merging drops); decoding took {:.1} ms ({:.1} MB/s)",
+            bytes.len(),
+            secs * 1e3,
+            if secs > 0.0 {
+                bytes.len() as f64 / secs / 1e6
+            } else {
+                f64::INFINITY
+            },
+        );
+    }
     Ok(())
 }
 
@@ -249,6 +287,7 @@ mod tests {
 
     #[test]
     fn consecutive_drops_merge() {
+        use leman::devices::fuzz_harness::merge_drops;
         let merged = merge_drops(vec![
             DeviceEvent::Dropped { bytes: 1 },
             DeviceEvent::Dropped { bytes: 2 },
