@@ -709,18 +709,23 @@ impl Reader {
         }
     }
 
-    fn lose(&self, error: &str, last_error: &mut Option<String>) {
+    /// Reports a failure. A failure to open that repeats the previous one is neither logged
+    /// nor recorded again; after the device was opened, a failure is always recorded (so a
+    /// replay sees the state change), but logged only when its message is new.
+    fn lose(&self, error: &str, last_error: &mut Option<String>, was_opened: bool) {
         let index = self.index;
-        // Record each distinct failure once, not every retry.
-        if last_error.as_deref() != Some(error) {
+        let repeated = last_error.as_deref() == Some(error);
+        if !repeated {
             tracing::warn!("device {index}: {error}");
+            *last_error = Some(error.to_string());
+        }
+        if !repeated || was_opened {
             let at = self.shared.stamp(None, |at| Record::Lost {
                 at,
                 device: index,
                 error: error.to_string(),
             });
             lock(&self.shared.state).lost(index, at, error);
-            *last_error = Some(error.to_string());
         }
     }
 
@@ -751,7 +756,7 @@ impl Reader {
             let mut transport = match self.opener.open() {
                 Ok(t) => t,
                 Err(e) => {
-                    self.lose(&e.to_string(), &mut last_error);
+                    self.lose(&e.to_string(), &mut last_error, false);
                     self.pause(backoff);
                     backoff = (backoff * 2).min(self.reconnect_max);
                     continue;
@@ -767,7 +772,7 @@ impl Reader {
                 Ok(()) => {}
                 Err(DriverError::Stopped) => break,
                 Err(e) => {
-                    self.lose(&e.to_string(), &mut last_error);
+                    self.lose(&e.to_string(), &mut last_error, true);
                     drop(transport);
                     self.pause(backoff);
                     backoff = (backoff * 2).min(self.reconnect_max);
@@ -790,7 +795,7 @@ impl Reader {
                         &mut events,
                     ),
                     Err(e) => {
-                        self.lose(&e.to_string(), &mut last_error);
+                        self.lose(&e.to_string(), &mut last_error, true);
                         break;
                     }
                 }
@@ -1046,6 +1051,72 @@ mod tests {
             snap.role(Role::Head).pose.is_some(),
             "head pose survives a loss"
         );
+    }
+
+    /// Opens fine, never answers.
+    struct Silent;
+
+    impl Transport for Silent {
+        fn read(
+            &mut self,
+            _buf: &mut [u8],
+        ) -> Result<usize, crate::devices::transport::TransportError> {
+            std::thread::sleep(Duration::from_millis(1));
+            Ok(0)
+        }
+        fn write(
+            &mut self,
+            _bytes: &[u8],
+        ) -> Result<(), crate::devices::transport::TransportError> {
+            Ok(())
+        }
+        fn describe(&self) -> String {
+            "silent".into()
+        }
+    }
+
+    #[test]
+    fn a_device_that_never_answers_is_lost_on_every_attempt_and_recorded_so() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("silent.session");
+        let mut profile = sample("spaceball").header.profile;
+        profile.devices[0].driver.init_timeout_s = 0.02;
+        profile.devices[0].driver.reconnect_min_s = 0.005;
+        profile.devices[0].driver.reconnect_max_s = 0.01;
+        let opener: Box<dyn Opener> = Box::new(FnOpener::new("silent", || {
+            Ok(Box::new(Silent) as Box<dyn Transport>)
+        }));
+        let hub = Hub::start_with(
+            profile,
+            vec![Some(opener)],
+            Arc::new(crate::clock::RealClock::new()),
+            HubOptions {
+                record_to: Some(out.clone()),
+            },
+        )
+        .expect("hub");
+        let snap = wait_for(&hub, |s| {
+            s.devices[0].reconnects >= 3 && s.devices[0].state == DeviceState::Lost
+        });
+        assert!(
+            snap.devices[0]
+                .last_error
+                .as_deref()
+                .is_some_and(|e| e.contains("@1")),
+            "{snap:#?}"
+        );
+        hub.stop().expect("stop");
+        let session = Session::load(&out).expect("load");
+        let count = |f: fn(&Record) -> bool| session.records.iter().filter(|r| f(r)).count();
+        let opened = count(|r| matches!(r, Record::Opened { .. }));
+        let lost = count(|r| matches!(r, Record::Lost { .. }));
+        assert!(opened >= 4, "{opened}");
+        // Every opening that timed out is followed by a loss (the last may be cut by stop).
+        assert!(lost + 1 >= opened, "{lost} losses for {opened} openings");
+        let end = session.duration();
+        let mut r = Replayer::new(session).expect("replay");
+        r.run_to_end();
+        assert_eq!(r.snapshot(end).devices[0].reconnects as usize, opened - 1);
     }
 
     #[test]
