@@ -9,6 +9,7 @@ pub mod procedure;
 pub mod profile;
 pub mod sample_session;
 pub mod screen;
+pub mod sighting;
 
 pub use fit::{FitError, FitOptions, ScreenFit, Units, fit_screen};
 pub use frames::{BaselineMode, Eye, HeadEyes, TrackerFrames};

@@ -53,7 +53,8 @@ pub struct Args {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
-    /// Device profile (TOML) for the live procedure; the desktop default if absent.
+    /// Device profile (TOML) with a tracked wand, for the live procedure (required for it:
+    /// the desktop mouse has no 3D position).
     #[arg(long, value_name = "DEVICES.toml")]
     pub profile: Option<PathBuf>,
     /// Run the procedure on a recorded device session instead of live devices.

@@ -212,9 +212,9 @@ mod tests {
                 out_err.push(out.position_m.x);
             }
         }
-        // Measured: the filtered jitter is under a fifth of the raw jitter.
+        // Measured: 0.11 mm RMS filtered vs 0.58 mm raw (5.1 times less).
         assert!(
-            rms(&out_err) < rms(&raw_err) / 5.0,
+            rms(&out_err) < rms(&raw_err) / 4.0,
             "{} vs {}",
             rms(&out_err),
             rms(&raw_err)
@@ -234,9 +234,10 @@ mod tests {
             lag = p.position_m.x - f.filter(d, &p).expect("out").position_m.x;
             assert_eq!(raw.filter(d, &p), Some(p));
         }
-        // One Euro's cutoff at 0.5 m/s is 1 + 20·0.5 = 11 Hz: time constant 14.5 ms,
-        // so the steady lag is about 0.5 m/s × 14.5 ms ≈ 7 mm (a plain 1 Hz low-pass: 80 mm).
-        assert!(lag > 0.0 && lag < 0.01, "lag {lag}");
+        // Measured: 3.9 mm. The speed is estimated against the previous filtered value (as in
+        // the reference implementation), so lag itself raises the cutoff; a plain 1 Hz
+        // low-pass would lag 80 mm.
+        assert!(lag > 0.0 && lag < 0.006, "lag {lag}");
     }
 
     #[test]
