@@ -10,7 +10,7 @@
 //! | --- | --- | --- |
 //! | `D` | 2-byte period (1/16 ms), six big-endian i16 Tx Ty Tz Rx Ry Rz | [`AxesSample`] |
 //! | `.` | 2 bytes: 12 buttons (4000FLX) | `Buttons` |
-//! | `K` | 2 bytes: 8 buttons (older models); ignored once a `.` was seen | `Buttons` |
+//! | `K` | 2 bytes: 8 buttons (older models); ignored once a `.` was seen or the banner named a 4000FLX | `Buttons` |
 //! | `@` | banner text (`@1 ...`, `@2 Firmware version 2.43 ...`) | `Status` |
 //! | `E` | error text | `Status` |
 //!
@@ -198,10 +198,12 @@ impl SpaceballDecoder {
                         text: format!("Spaceball error: {text}"),
                     }
                 } else if let Some(version) = firmware_version(&text) {
-                    StatusEvent::Identified {
-                        model: model_for_firmware(version),
-                        text,
+                    let model = model_for_firmware(version);
+                    // A 4000FLX sends `.` packets; its `K` packets are only for compatibility.
+                    if model.contains("4000FLX") {
+                        self.seen_dot = true;
                     }
+                    StatusEvent::Identified { model, text }
                 } else {
                     StatusEvent::Report { text }
                 };
@@ -361,6 +363,19 @@ mod tests {
         assert_eq!(buttons(&events), vec![Vec::<u8>::new()]);
         let (pressed, right) = dot_buttons([0x20, 0x80]);
         assert_eq!((pressed, right), (vec![6], true));
+    }
+
+    #[test]
+    fn k_is_ignored_after_a_4000flx_banner_but_not_after_a_2003_banner() {
+        let mut bytes = encode_banner("2.45");
+        bytes.extend(encode_k([0, 1]));
+        assert!(buttons(&feed_all(&mut SpaceballDecoder::new(), &bytes)).is_empty());
+        let mut bytes = encode_banner("2.15");
+        bytes.extend(encode_k([0, 1]));
+        assert_eq!(
+            buttons(&feed_all(&mut SpaceballDecoder::new(), &bytes)),
+            vec![vec![0]]
+        );
     }
 
     #[test]
