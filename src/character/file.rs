@@ -70,7 +70,10 @@ pub enum CharacterFileError {
 
 /// A per-point (or per-spring) array in the file: one value for all, or one each.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(untagged)]
+#[serde(
+    untagged,
+    expecting = "one value for all items, or a list with one value per item (numbers; [a, b, c] for tensors and vectors)"
+)]
 enum PerItem<T> {
     Uniform(T),
     Each(Vec<T>),
@@ -514,6 +517,19 @@ mod tests {
         let text = format!("{}fat_m = [0.01, 0.02]{}", &text[..start], &text[end..]);
         let m = load_error(&text);
         assert!(m.contains("skin: fat_m has 2 values, expected 48"), "{m}");
+    }
+
+    #[test]
+    fn wrong_type_of_per_point_value_is_explained() {
+        let text = arm_text();
+        let start = text.find("mass_kg = ").expect("mass");
+        let end = start + text[start..].find('\n').expect("eol");
+        let text = format!("{}mass_kg = \"heavy\"{}", &text[..start], &text[end..]);
+        let m = load_error(&text);
+        assert!(
+            m.contains("mass_kg") && m.contains("one value per item"),
+            "{m}"
+        );
     }
 
     #[test]
