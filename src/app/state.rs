@@ -682,3 +682,126 @@ impl AppState {
         self.last_record.as_ref().map_or(0, |r| r.frame + 1)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::app::scheduler::{Pacing, SchedulerConfig};
+    use crate::devices::desktop::DesktopEvent;
+    use crate::devices::profile::Profile;
+    use crate::devices::replay::ClockedReplay;
+    use crate::devices::session::{Record, Session};
+    use std::sync::Arc;
+
+    fn torso16() -> Character {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("assets/characters/torso_16.toml");
+        Character::load(&path).expect("torso_16")
+    }
+
+    struct Recorder(Vec<(Scene, StereoViews)>);
+
+    impl FrameRenderer for Recorder {
+        fn render(
+            &mut self,
+            scene: &Scene,
+            views: &StereoViews,
+            _output: &OutputSettings,
+            _frame_index: u64,
+        ) -> Result<(), String> {
+            self.0.push((scene.clone(), *views));
+            Ok(())
+        }
+    }
+
+    fn state_with(session: Session, clock: &VirtualClock) -> AppState {
+        let character = torso16();
+        let model = crate::app::setup::surface_model(&character, IntegratorKind::Verlet);
+        let devices = ClockedReplay::new(session, Arc::new(clock.clone())).expect("replay");
+        let scheduler = Scheduler::new(
+            SchedulerConfig {
+                pacing: Pacing::Offline,
+                ..SchedulerConfig::default()
+            },
+            0.0,
+        )
+        .expect("scheduler");
+        AppState::new(
+            character,
+            model,
+            CalibrationProfile::default(),
+            Box::new(devices),
+            scheduler,
+        )
+    }
+
+    #[test]
+    fn grids_keep_the_aspect_and_the_point_count() {
+        assert_eq!(grid_for_points(1024, 32, 32), (32, 32));
+        assert_eq!(grid_for_points(256, 32, 32), (16, 16));
+        let (m, n) = grid_for_points(576, 32, 16);
+        assert!((m * n).abs_diff(576) < 40 && m > n);
+        assert!(grid_for_points(1, 4, 4).0 >= 3);
+    }
+
+    #[test]
+    fn changed_parameters_become_parameter_changes() {
+        let character = torso16();
+        let before = CharacterParams::of(&character);
+        assert!(before.point_mass_kg > 0.0);
+        assert!(before.changes_to(&before, &character).is_empty());
+        let after = CharacterParams {
+            fat_m: before.fat_m + 0.01,
+            elasticity_scale: 2.0,
+            ..before
+        };
+        let changes = before.changes_to(&after, &character);
+        assert_eq!(changes.len(), 2);
+        assert!(changes.iter().any(|c| matches!(c, ParameterChange::Fat(Selection::All, v) if (*v - after.fat_m).abs() < 1e-7)));
+        let base = mean_sym2(&character.skin.stretch);
+        assert!(changes.iter().any(|c| matches!(c, ParameterChange::Stretch(Selection::All, s) if (s[0] - 2.0 * base[0]).abs() < 1e-3 * base[0].abs().max(1.0))));
+    }
+
+    #[test]
+    fn without_a_head_tracker_the_view_is_from_the_calibrated_position_and_the_mouse_moves_the_wand()
+     {
+        // A desktop session: the mouse moves to the right edge at 0.1 s.
+        let mut session = Session::new(Profile::desktop_default());
+        session.records.push(Record::Opened {
+            at: Duration::ZERO,
+            device: 0,
+        });
+        session.records.push(Record::Desktop {
+            at: Duration::from_millis(100),
+            event: DesktopEvent::MouseMove { x: 1.0, y: 0.5 },
+        });
+        let clock = VirtualClock::new();
+        let mut state = state_with(session, &clock);
+        let mut renderer = Recorder(Vec::new());
+        let period = Duration::from_micros(16_667);
+        let mut wand_x = Vec::new();
+        for n in 0..12u32 {
+            state.replay_timing = Some(ReplayTiming {
+                clock: clock.clone(),
+                frame_start: period * n,
+                period,
+                second_read_fraction: 0.75,
+            });
+            let record = state.run_frame(&clock, &mut renderer);
+            assert!(record.sim_steps > 0);
+            let (scene, views) = renderer.0.last().expect("rendered");
+            // The desktop head sits at the calibration's viewing position.
+            let centre = views.center.position_m;
+            assert!(
+                (centre - Vec3::new(0.0, 0.0, 0.6)).length() < 1e-4,
+                "{centre}"
+            );
+            let wand = scene.wand.expect("wand drawn");
+            wand_x.push(wand.world_from_wand.w_axis.x);
+            assert!(scene.skin.is_some());
+        }
+        // The cursor moved from the centre to the right edge of the 0.4 m wand area.
+        assert!(wand_x[0].abs() < 1e-5);
+        assert!((wand_x[11] - 0.2).abs() < 1e-4, "{wand_x:?}");
+    }
+}
