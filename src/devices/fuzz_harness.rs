@@ -115,6 +115,62 @@ mod tests {
         fuzz_decoder(Protocol::Opentrack, &[]);
     }
 
+    #[test]
+    fn chunking_never_changes_events_on_real_streams_with_garbage() {
+        use crate::devices::fastrak::{FastrakFormat, FastrakSettings};
+        let fs = FastrakSettings::default();
+        let rec = encode::fastrak::FastrakRecord {
+            station: 1,
+            status: b' ',
+            position: [1.0, 2.0, 3.0],
+            euler_deg: [4.0, 5.0, 6.0],
+            quaternion: [1.0, 0.0, 0.0, 0.0],
+            stylus: false,
+        };
+        let streams: Vec<(Protocol, Vec<u8>)> = vec![
+            (
+                Protocol::FastrakAscii,
+                encode::fastrak::encode_record(FastrakFormat::Ascii, &fs, &rec),
+            ),
+            (
+                Protocol::FastrakBinary,
+                encode::fastrak::encode_record(FastrakFormat::Binary, &fs, &rec),
+            ),
+            (
+                Protocol::Spaceball,
+                encode::spaceball::encode_d(0x0D0D, [1, 2, 0x5E11, 4, 5, 6]),
+            ),
+            (
+                Protocol::Magellan,
+                encode::magellan::encode_d([1, -2, 3, -4, 5, -6]),
+            ),
+            (
+                Protocol::Logitech,
+                encode::logitech::report(0, [1, -2, 3], [4, 5, 6]).to_vec(),
+            ),
+        ];
+        for (protocol, packet) in streams {
+            let mut data = b"\x00garbage\r0".to_vec();
+            for _ in 0..3 {
+                data.extend(&packet);
+                data.extend(b"\xff\x80x");
+            }
+            data.extend(&packet[..packet.len() / 2]);
+            for chunk_selector in 0..64u8 {
+                let mut input = vec![chunk_selector];
+                input.extend(&data);
+                fuzz_decoder(protocol, &input);
+            }
+            // And the packets were really decoded (the check above is not vacuous).
+            let events = decode_all(decoder_for(protocol).as_mut(), &data);
+            let measurements = events
+                .iter()
+                .filter(|e| matches!(e, DeviceEvent::Pose(_) | DeviceEvent::Axes(_)))
+                .count();
+            assert_eq!(measurements, 3, "{protocol}: {events:?}");
+        }
+    }
+
     proptest! {
         #[test]
         fn harness_holds_on_arbitrary_input(data in proptest::collection::vec(any::<u8>(), 0..400)) {
