@@ -134,7 +134,14 @@ pub fn replay_headless(
         settings.frame_count.unwrap_or(n)
     };
 
-    if let Some(dir) = &settings.frames_dir {
+    // Make the output folders first, so a bad path fails before the frames are run.
+    let log_dir = settings
+        .log_path
+        .as_ref()
+        .and_then(|p| p.parent())
+        .filter(|d| !d.as_os_str().is_empty())
+        .map(Path::to_path_buf);
+    for dir in settings.frames_dir.iter().chain(log_dir.iter()) {
         std::fs::create_dir_all(dir).map_err(|source| crate::files::WriteError {
             path: dir.clone(),
             source,

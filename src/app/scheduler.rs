@@ -261,6 +261,10 @@ pub struct FrameRecord {
     pub update_wall_s: f64,
     /// Wall time of the render, seconds.
     pub render_wall_s: f64,
+    /// Part of `render_wall_s` spent building the scene on the CPU (filled in by the app;
+    /// 0 when not measured), seconds.
+    #[serde(default)]
+    pub scene_wall_s: f64,
     /// Wall time of the whole frame's work, seconds.
     pub frame_wall_s: f64,
     /// The sim/real ratio the user set.
@@ -565,6 +569,7 @@ impl Scheduler {
             read_wall_s: read_wall.as_secs_f64(),
             update_wall_s: update_wall.as_secs_f64(),
             render_wall_s: render_wall.as_secs_f64(),
+            scene_wall_s: 0.0,
             frame_wall_s: end.saturating_sub(start).as_secs_f64(),
             ratio_set: self.config.sim_per_real,
             ratio_achieved: achieved,

@@ -229,6 +229,7 @@ pub struct AppState {
     last_update_at: Option<Duration>,
     reads_this_frame: u8,
     shown_time_s: f64,
+    last_scene_wall: Duration,
 }
 
 impl std::fmt::Debug for AppState {
@@ -307,6 +308,7 @@ impl AppState {
             last_update_at: None,
             reads_this_frame: 0,
             shown_time_s: 0.0,
+            last_scene_wall: Duration::ZERO,
             character,
         };
         state.refresh_surface();
@@ -362,6 +364,8 @@ impl AppState {
             r
         };
         self.scheduler = scheduler;
+        let mut record = record;
+        record.scene_wall_s = self.last_scene_wall.as_secs_f64();
         self.table1.wall_s += record.sim_wall_s;
         if record.deforming {
             self.table1.simulated_s += record.sim_advanced_s;
@@ -666,7 +670,9 @@ impl FrameWork for AppFrame<'_> {
         let Some(views) = state.last_views else {
             return;
         };
+        let scene_start = self.clock.now();
         let scene = state.scene(read.wand.map(|w| w.pose));
+        state.last_scene_wall = self.clock.now().saturating_sub(scene_start);
         let frame_index = state.scheduler_frames_hint();
         if let Err(e) = self
             .renderer
