@@ -272,6 +272,17 @@ mod tests {
     }
 
     #[test]
+    fn sub_rect_is_the_window_area() {
+        let s = ScreenRect::desktop(0.53, 0.30).expect("screen");
+        // The right half of the monitor, top 2/3.
+        let w = s.sub_rect(0.5, 1.0 / 3.0, 1.0, 1.0).expect("window");
+        assert!((w.width_m() - 0.265).abs() < 1e-6 && (w.height_m() - 0.2).abs() < 1e-6);
+        assert!((w.upper_right_m() - s.upper_right_m()).length() < 1e-6);
+        assert!((w.lower_left_m - Vec3::new(0.0, -0.05, 0.0)).length() < 1e-6);
+        assert!(s.sub_rect(0.5, 0.5, 0.5, 1.0).is_err(), "zero width");
+    }
+
+    #[test]
     fn bad_rectangles_are_rejected() {
         let e = ScreenRect::new(Vec3::ZERO, Vec3::X * 0.5, Vec3::new(0.1, 0.3, 0.0));
         assert!(matches!(e, Err(ScreenError::NotRectangular { .. })));

@@ -3,6 +3,8 @@
 
 pub mod one_euro;
 pub mod predict;
+pub mod role;
 
 pub use one_euro::{FilterConfig, PoseFilter};
 pub use predict::{PosePredictor, PredictorConfig};
+pub use role::RoleTracker;
