@@ -2,7 +2,8 @@
 //!
 //! Headless use (tests, `replay --headless`, benches) goes through [`GpuContext::new_headless`]:
 //! it builds the instance with `InstanceDescriptor::new_without_display_handle_from_env()`, so
-//! `WGPU_BACKEND` (and the other `WGPU_*` variables) are honoured, and it prefers a CPU adapter
+//! `WGPU_BACKEND` (and the other `WGPU_*` instance variables) are honoured, keeps only adapters
+//! whose name contains `WGPU_ADAPTER_NAME` when that is set, and it prefers a CPU adapter
 //! (Mesa lavapipe) when [`AdapterPreference::PreferCpu`] is asked for, so images are the same on
 //! every machine. The window path (eframe) creates its own device; the renderer only needs a
 //! `wgpu::Device` and `wgpu::Queue` (see [`crate::render::Renderer::new`]).
@@ -118,6 +119,11 @@ impl GpuContext {
         let backends = descriptor.backends;
         let instance = wgpu::Instance::new(descriptor);
         let mut adapters = instance.enumerate_adapters(backends).await;
+        // `WGPU_ADAPTER_NAME` (as in wgpu's own helpers): keep adapters whose name contains it.
+        if let Ok(wanted) = std::env::var("WGPU_ADAPTER_NAME") {
+            let wanted = wanted.to_lowercase();
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&wanted));
+        }
         adapters.sort_by_key(|a| {
             let info = a.get_info();
             adapter_rank(info.device_type, info.backend, preference)

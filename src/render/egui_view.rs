@@ -79,7 +79,7 @@ impl EguiSceneView {
                 Some(id) => {
                     egui_renderer.update_egui_texture_from_wgpu_texture(
                         &render_state.device,
-                        &target.gamma_view,
+                        &target.color_view,
                         wgpu::FilterMode::Nearest,
                         id,
                     );
@@ -87,7 +87,7 @@ impl EguiSceneView {
                 }
                 None => egui_renderer.register_native_texture(
                     &render_state.device,
-                    &target.gamma_view,
+                    &target.color_view,
                     wgpu::FilterMode::Nearest,
                 ),
             };

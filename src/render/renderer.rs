@@ -183,11 +183,12 @@ pub enum RenderError {
 pub struct RenderTarget {
     /// The resolved colour texture (RENDER_ATTACHMENT | COPY_SRC | TEXTURE_BINDING).
     pub color: wgpu::Texture,
-    /// View of `color` in its own format (sRGB: sampling decodes to linear light).
+    /// The view to show the image with (e.g. registered as an egui texture): it reads the
+    /// stored sRGB bytes as gamma-encoded values (RGBA8 unorm over the sRGB texture), which is
+    /// what egui expects of a texture. Sampling it in a shader of your own gives sRGB values.
     pub color_view: wgpu::TextureView,
-    /// View of `color` that reads the stored bytes as gamma-encoded values (RGBA8 unorm over
-    /// the sRGB texture): what egui expects of a texture it shows.
-    pub gamma_view: wgpu::TextureView,
+    /// The view drawn into (the texture's own, sRGB, format: shaders write linear light).
+    attachment_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     msaa_view: Option<wgpu::TextureView>,
     width: u32,
@@ -464,8 +465,8 @@ impl Renderer {
                 .create_view(&wgpu::TextureViewDescriptor::default())
         });
         Ok(RenderTarget {
-            color_view: color.create_view(&wgpu::TextureViewDescriptor::default()),
-            gamma_view: color.create_view(&wgpu::TextureViewDescriptor {
+            attachment_view: color.create_view(&wgpu::TextureViewDescriptor::default()),
+            color_view: color.create_view(&wgpu::TextureViewDescriptor {
                 label: Some("leman colour (gamma view)"),
                 format: Some(gamma_format),
                 ..Default::default()
@@ -620,8 +621,8 @@ impl Renderer {
             a: 1.0,
         };
         let (attachment_view, resolve_target) = match &target.msaa_view {
-            Some(msaa) => (msaa, Some(&target.color_view)),
-            None => (&target.color_view, None),
+            Some(msaa) => (msaa, Some(&target.attachment_view)),
+            None => (&target.attachment_view, None),
         };
         let pass_count = passes.len().max(1);
         for i in 0..pass_count {
