@@ -232,6 +232,20 @@ fn bad_corner_files_fail_clearly() {
     );
     assert!(e.contains("collinear"), "{e}");
     assert!(!out_path.exists(), "nothing written on failure");
+    // Left and right swapped: a valid rectangle facing away from the viewer, with a warning.
+    let mirrored = serde_json::json!({"units": "m",
+        "lower_left": [[0.265, -0.15, 0]], "lower_right": [[-0.265, -0.15, 0]],
+        "upper_left": [[0.265, 0.15, 0]], "upper_right": [[-0.265, 0.15, 0]]});
+    let file = write_corners(dir.path(), "mirrored.json", &mirrored);
+    let out = leman(&[
+        "calibrate",
+        "--corners",
+        file.to_str().expect("path"),
+        "--json",
+    ]);
+    ok_stdout(&out);
+    let warning = String::from_utf8_lossy(&out.stderr);
+    assert!(warning.contains("mirrored order"), "{warning}");
 }
 
 #[test]

@@ -201,6 +201,13 @@ fn print_fit(fit: &ScreenFit, out: Option<&Path>, as_json: bool) -> anyhow::Resu
 /// Saves `fit` into a profile built on `args.calibration` (or the default) at `args.out`.
 fn save_fit(args: &Args, fit: &ScreenFit, name: &str) -> anyhow::Result<()> {
     let mut profile = base_profile(args)?;
+    let head_m = profile.default_head.position_m;
+    if fit.screen.distance_in_front_m(head_m) <= 0.0 {
+        eprintln!(
+            "warning: the fitted screen faces away from the profile's default head position {:?}; were the corners touched in mirrored order (left and right swapped)?",
+            head_m.to_array()
+        );
+    }
     profile.screen = fit.screen;
     profile.residual_m = fit.residual_m;
     profile.name = name.to_owned();
