@@ -128,8 +128,6 @@ pub struct CornerProcedure {
     recorded: CornerSamples,
     window: VecDeque<(Duration, Vec3)>,
     button_was_down: bool,
-    /// After a redo of one corner, go straight back to review.
-    redo_single: bool,
 }
 
 impl CornerProcedure {
@@ -155,7 +153,6 @@ impl CornerProcedure {
             recorded: CornerSamples::new(),
             window: VecDeque::new(),
             button_was_down: false,
-            redo_single: false,
         }
     }
 
@@ -249,7 +246,7 @@ impl CornerProcedure {
             return None;
         }
         match self.step.clone() {
-            Step::Touch { corner, index } => {
+            Step::Touch { corner, .. } => {
                 if self.window.len() < self.config.min_samples.max(2) {
                     return Some(ProcedureEvent::PressIgnoredTooFewSamples {
                         samples: self.window.len(),
@@ -266,7 +263,7 @@ impl CornerProcedure {
                 let mean_m = samples.iter().copied().sum::<Vec3>() / samples.len() as f32;
                 let count = samples.len();
                 self.recorded.insert(corner, samples);
-                self.advance_after(index);
+                self.advance();
                 Some(ProcedureEvent::Recorded {
                     corner,
                     mean_m,
@@ -282,17 +279,20 @@ impl CornerProcedure {
         }
     }
 
-    fn advance_after(&mut self, index: usize) {
-        let next = index + 1;
-        if self.redo_single || next >= self.config.corners.len() {
-            self.redo_single = false;
-            self.step = Step::Review(fit_screen(&self.recorded, &self.config.fit));
-        } else {
-            self.step = Step::Touch {
-                corner: self.config.corners[next],
-                index: next,
-            };
-        }
+    /// Moves on to the first corner (in order) not yet recorded, or to review.
+    fn advance(&mut self) {
+        let next = self
+            .config
+            .corners
+            .iter()
+            .position(|c| !self.recorded.contains_key(c));
+        self.step = match next {
+            Some(index) => Step::Touch {
+                corner: self.config.corners[index],
+                index,
+            },
+            None => Step::Review(fit_screen(&self.recorded, &self.config.fit)),
+        };
     }
 
     /// Accepts the reviewed fit; `Err` (with the state unchanged) unless in review with a good
@@ -310,27 +310,20 @@ impl CornerProcedure {
         }
     }
 
-    /// Re-takes one corner (from review or while touching): its samples are dropped and the
-    /// procedure waits for it; after it, straight back to review. Unknown corners are ignored.
+    /// Re-takes one corner (from review, or an earlier corner while touching): its samples are
+    /// dropped and the procedure waits for it; after it, on to the first corner still missing,
+    /// or straight back to review. Unknown corners are ignored.
     pub fn redo(&mut self, corner: Corner) {
         let Some(index) = self.config.corners.iter().position(|c| *c == corner) else {
             return;
         };
         self.recorded.remove(&corner);
-        // From review or done, only this corner is re-taken; mid-sequence, carry on in order.
-        self.redo_single = matches!(self.step, Step::Review(_) | Step::Done(_))
-            || self
-                .config
-                .corners
-                .iter()
-                .all(|c| *c == corner || self.recorded.contains_key(c));
         self.step = Step::Touch { corner, index };
     }
 
     /// Drops every sample and starts again at the first corner.
     pub fn redo_all(&mut self) {
         self.recorded.clear();
-        self.redo_single = false;
         self.step = Step::Touch {
             corner: self.config.corners[0],
             index: 0,
@@ -494,6 +487,35 @@ mod tests {
         };
         assert!(good.residual_m < 0.001, "{}", good.residual_m);
         assert_eq!(d.proc.accept(), Ok(good));
+    }
+
+    #[test]
+    fn redo_an_earlier_corner_mid_sequence_then_carry_on() {
+        let s = screen();
+        let mut d = Driver::new();
+        d.touch(s.corner_m(Corner::LowerLeft) + Vec3::Y * 0.05); // a slip
+        d.touch(s.corner_m(Corner::LowerRight));
+        d.proc.redo(Corner::LowerLeft);
+        assert_eq!(
+            d.proc.step(),
+            &Step::Touch {
+                corner: Corner::LowerLeft,
+                index: 0
+            }
+        );
+        d.touch(s.corner_m(Corner::LowerLeft));
+        // Lower right is kept: on to upper right.
+        assert_eq!(
+            d.proc.step(),
+            &Step::Touch {
+                corner: Corner::UpperRight,
+                index: 2
+            }
+        );
+        d.touch(s.corner_m(Corner::UpperRight));
+        d.touch(s.corner_m(Corner::UpperLeft));
+        let fit = d.proc.accept().expect("accept");
+        assert!(fit.residual_m < 0.001, "{}", fit.residual_m);
     }
 
     #[test]
