@@ -55,7 +55,13 @@ fn gpu() -> Option<&'static GpuContext> {
         }
         Err(e) if gpu_required_by_env() => panic!("LEMAN_REQUIRE_GPU=1 but no GPU: {e}"),
         Err(e) => {
-            eprintln!("\n*** SKIPPED render golden tests: {e} ***\n");
+            // Written to the stderr handle directly: libtest captures `eprintln!`, and a skip
+            // must be seen.
+            use std::io::Write;
+            let _ = writeln!(
+                std::io::stderr(),
+                "\n*** SKIPPED render golden tests: {e} ***\n"
+            );
             None
         }
     })

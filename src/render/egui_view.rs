@@ -128,7 +128,11 @@ mod tests {
                 !crate::render::device_caps::gpu_required_by_env(),
                 "LEMAN_REQUIRE_GPU=1 but no GPU"
             );
-            eprintln!("*** SKIPPED scene_texture_is_shown_by_egui: no GPU adapter ***");
+            use std::io::Write;
+            let _ = writeln!(
+                std::io::stderr(),
+                "*** SKIPPED scene_texture_is_shown_by_egui: no GPU adapter ***"
+            );
             return;
         }
         let render_state = egui_kittest::wgpu::create_render_state(
