@@ -330,7 +330,6 @@ impl Scheduler {
         validate(&config)?;
         let level = config.start_level;
         let first_render_reserve = config.frame_period / 4;
-        let pending_points = config.skin_points_levels.get(level).copied();
         Ok(Self {
             config,
             frame: 0,
@@ -341,7 +340,8 @@ impl Scheduler {
             sim_time_s: finite_or_zero(sim_time_s),
             sim_target_s: finite_or_zero(sim_time_s),
             level,
-            pending_points,
+            // The model keeps its own resolution until adapt (or `set_level`) changes it.
+            pending_points: None,
             window: VecDeque::new(),
             ratio_held: true,
             behind_frames: 0,
@@ -385,6 +385,14 @@ impl Scheduler {
             self.pending_points = Some(points);
         }
         Ok(())
+    }
+
+    /// Tells the scheduler the model's current resolution without changing it: the level is
+    /// the highest one not above `points` (the lowest if all are above).
+    pub fn assume_points(&mut self, points: u32) {
+        let levels = &self.config.skin_points_levels;
+        self.level = levels.iter().rposition(|&l| l <= points).unwrap_or(0);
+        self.pending_points = None;
     }
 
     /// Moves the simulation clock (after a rewind, a new motion or a restored snapshot).
@@ -697,7 +705,7 @@ mod tests {
                 render_cost: Duration::from_millis(4),
                 step_cost_per_point: Duration::from_nanos(1000),
                 step_sim_s: 0.002,
-                points: 0,
+                points: 1024,
                 sim_time_s: 0.0,
                 deforming: true,
                 reads: Vec::new(),
@@ -1053,6 +1061,24 @@ mod tests {
         }
         let back: FrameRecord = serde_json::from_str(&line).expect("round trip");
         assert_eq!(back, r);
+    }
+
+    #[test]
+    fn the_model_keeps_its_resolution_until_adapt_changes_it() {
+        let clock = VirtualClock::new();
+        let mut work = FakeWork::new(&clock);
+        work.points = 256;
+        work.step_cost_per_point = Duration::from_nanos(100);
+        let mut scheduler = Scheduler::new(SchedulerConfig::default(), 0.0).expect("config");
+        scheduler.assume_points(256);
+        assert_eq!(scheduler.skin_points(), 256);
+        let records = run(&mut scheduler, &clock, &mut work, 5);
+        assert_eq!(work.points, 256);
+        assert!(records.iter().all(|r| r.skin_points == 256));
+        scheduler.assume_points(1000);
+        assert_eq!(scheduler.skin_points(), 576);
+        scheduler.assume_points(10);
+        assert_eq!(scheduler.skin_points(), 64);
     }
 
     #[test]

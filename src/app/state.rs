@@ -276,6 +276,10 @@ impl AppState {
             ..Tolerances::default()
         };
         let motion = (!character.motions.is_empty()).then_some(0);
+        let mut scheduler = scheduler;
+        if let Some(m) = &model {
+            scheduler.assume_points(u32::try_from(m.point_count()).unwrap_or(u32::MAX));
+        }
         let mut state = Self {
             shape_meshes,
             model,
@@ -809,5 +813,22 @@ mod tests {
         // The cursor moved from the centre to the right edge of the 0.4 m wand area.
         assert!(wand_x[0].abs() < 1e-5);
         assert!((wand_x[11] - 0.2).abs() < 1e-4, "{wand_x:?}");
+    }
+
+    #[test]
+    fn the_scheduler_changes_the_skin_resolution_of_the_real_model() {
+        let clock = VirtualClock::new();
+        let mut state = state_with(Session::new(Profile::desktop_default()), &clock);
+        let (m, n) = state.skin_grid();
+        assert_eq!(m * n, 256);
+        state.set_skin_points(64);
+        assert_eq!(state.skin_grid(), (8, 8));
+        assert_eq!(state.surface().positions_m.len(), 64);
+        assert!(state.sim_error.is_none(), "{:?}", state.sim_error);
+        let mut renderer = Recorder(Vec::new());
+        let record = state.run_frame(&clock, &mut renderer);
+        assert!(record.sim_steps > 0);
+        let (scene, _) = renderer.0.last().expect("rendered");
+        assert_eq!(scene.skin.as_ref().expect("skin").mesh.positions.len(), 64);
     }
 }
