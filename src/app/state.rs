@@ -26,6 +26,7 @@ use crate::sim::{
     SurfaceMesh, Tolerances,
 };
 use crate::stereo::{OutputSettings, StereoViews, ViewSettings, eye_views};
+use crate::tracking::{PredictorConfig, RoleTracker};
 use glam::Vec3;
 use std::time::Duration;
 
@@ -230,6 +231,8 @@ pub struct AppState {
     reads_this_frame: u8,
     shown_time_s: f64,
     last_scene_wall: Duration,
+    head_tracker: RoleTracker,
+    wand_tracker: RoleTracker,
 }
 
 impl std::fmt::Debug for AppState {
@@ -276,6 +279,7 @@ impl AppState {
             ..Tolerances::default()
         };
         let motion = (!character.motions.is_empty()).then_some(0);
+        let (head_filter, wand_filter) = (calibration.head_filter, calibration.wand_filter);
         let mut scheduler = scheduler;
         if let Some(m) = &model {
             scheduler.assume_points(u32::try_from(m.point_count()).unwrap_or(u32::MAX));
@@ -313,6 +317,8 @@ impl AppState {
             reads_this_frame: 0,
             shown_time_s: 0.0,
             last_scene_wall: Duration::ZERO,
+            head_tracker: RoleTracker::new(head_filter, PredictorConfig::default()),
+            wand_tracker: RoleTracker::new(wand_filter, PredictorConfig::default()),
             character,
         };
         state.refresh_surface();
@@ -466,8 +472,30 @@ impl AppState {
                 sampled_at: sample.at.unwrap_or(snapshot.now),
             })
         };
-        let head = timed(Role::Head, self);
-        let wand = timed(Role::Wand, self);
+        let mut head = timed(Role::Head, self);
+        let mut wand = timed(Role::Wand, self);
+        // Wire trackers: the calibration's filter per role, and the pose carried to the time
+        // of this read by the role's predictor. The desktop stand-ins are exact already.
+        let wire = |role: Role| {
+            let sample = snapshot.role(role);
+            !sample
+                .device
+                .and_then(|d| snapshot.devices.get(d))
+                .is_some_and(|d| d.protocol == "desktop")
+        };
+        for (role, timed, tracker) in [
+            (Role::Head, &mut head, &mut self.head_tracker),
+            (Role::Wand, &mut wand, &mut self.wand_tracker),
+        ] {
+            if let Some(t) = timed.as_mut()
+                && wire(role)
+            {
+                tracker.offer(t.sampled_at, &t.pose);
+                if let Some(p) = tracker.pose_at(snapshot.now).filter(Pose::is_valid) {
+                    t.pose = p;
+                }
+            }
+        }
         let nav = snapshot.role(Role::Navigation);
         let navigation = nav.at.map(|at| TimedAxes {
             value: nav.axes,
