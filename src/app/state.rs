@@ -478,10 +478,10 @@ impl AppState {
         // of this read by the role's predictor. The desktop stand-ins are exact already.
         let wire = |role: Role| {
             let sample = snapshot.role(role);
-            !sample
+            sample
                 .device
                 .and_then(|d| snapshot.devices.get(d))
-                .is_some_and(|d| d.protocol == "desktop")
+                .is_none_or(|d| d.protocol != "desktop")
         };
         for (role, timed, tracker) in [
             (Role::Head, &mut head, &mut self.head_tracker),
