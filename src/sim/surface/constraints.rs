@@ -16,10 +16,12 @@
 
 use glam::Vec3;
 
-use crate::character::ShapeInstance;
+use crate::character::{PROJECTION_TOLERANCE_M, Primitive, ShapeGeometry, ShapeInstance};
 
 /// Most candidates a point keeps; beyond that it tests every shape.
-const MAX_CANDIDATES: usize = 8;
+const MAX_CANDIDATES: usize = 16;
+/// Corrections longer than this mark a point's neighbourhood for a re-check, metres.
+const RECHECK_M: f32 = 1e-4;
 /// Marker for "test every shape".
 const ALL_SHAPES: u8 = u8::MAX;
 
@@ -209,10 +211,14 @@ pub fn enforce(
                     continue;
                 }
                 let local = s.to_shape(q);
-                if s.geometry.value(local) >= 0.0 {
+                if outside_box(&s.geometry, local) {
                     continue;
                 }
-                let on_surface = s.geometry.project(local);
+                let (value, grad) = super::fastshape::value_and_gradient(&s.geometry, local);
+                if value >= 0.0 {
+                    continue;
+                }
+                let on_surface = project_near(&s.geometry, local, value, grad);
                 let d = s.world_from_shape.transform_vector3(on_surface - local);
                 if !d.is_finite() {
                     continue;
@@ -249,7 +255,9 @@ pub fn enforce(
             out.worst = (f as u32, last_shape as u32);
         }
         out.corrected += 1;
-        touched.push(f as u32);
+        if d.length() > RECHECK_M {
+            touched.push(f as u32);
+        }
         x[f] = p1.x;
         x[free + f] = p1.y;
         x[2 * free + f] = p1.z;
@@ -282,6 +290,48 @@ pub fn enforce(
         v[2 * free + f] = new_vel.z;
     }
     out
+}
+
+/// Cheap exact rejection before the inside/outside function: an undeformed superellipsoid or
+/// cylinder lies inside its axis-aligned box in the shape frame.
+#[inline]
+fn outside_box(geometry: &ShapeGeometry, p: Vec3) -> bool {
+    if !geometry.is_undeformed() {
+        return false;
+    }
+    match geometry.primitive {
+        Primitive::Superellipsoid { radii_m, .. } => {
+            p.x.abs() > radii_m.x || p.y.abs() > radii_m.y || p.z.abs() > radii_m.z
+        }
+        Primitive::Cylinder {
+            radius_m,
+            half_length_m,
+        } => p.x.abs() > radius_m || p.z.abs() > radius_m || p.y.abs() > half_length_m,
+        Primitive::Sphere { .. } => false,
+    }
+}
+
+/// Projection of a point just inside a shape: up to two Newton steps along the gradient
+/// (`q − F ∇F/|∇F|²`, error O(depth²·curvature), far below the shapes' own projection
+/// tolerance for the millimetre depths of one step), falling back to the shape's full
+/// projection when that does not land on the surface within [`PROJECTION_TOLERANCE_M`].
+fn project_near(geometry: &ShapeGeometry, p: Vec3, value: f32, grad: Vec3) -> Vec3 {
+    let (mut q, mut v, mut g) = (p, value, grad);
+    for _ in 0..2 {
+        let len2 = g.length_squared();
+        if len2.is_nan() || len2 <= 1e-12 || !v.is_finite() {
+            break;
+        }
+        q -= g * (v / len2);
+        let (nv, ng) = super::fastshape::value_and_gradient(geometry, q);
+        let glen = ng.length();
+        if glen > 0.0 && (nv / glen).abs() <= PROJECTION_TOLERANCE_M {
+            return q;
+        }
+        v = nv;
+        g = ng;
+    }
+    geometry.project(p)
 }
 
 /// Deepest penetration of any free point's fat point into any shape, metres (brute force over

@@ -20,6 +20,7 @@
 #![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
 
 pub mod constraints;
+mod fastshape;
 pub mod forces;
 mod resample;
 #[cfg(test)]
@@ -247,6 +248,74 @@ impl SurfaceModel {
         )
     }
 
+    /// One force evaluation (position and velocity forces) at the current state, for benchmarks
+    /// and profiling. Returns the sum of the accelerations (so the work cannot be optimised
+    /// away). The skeleton comes from the last step (the neutral posture before the first).
+    pub fn evaluate_forces_once(&mut self, poses: &mut dyn PoseSource) -> f32 {
+        self.ensure_start(poses);
+        let core = &self.core;
+        let w = &mut self.work;
+        w.kin.t0_s = core.t_s;
+        w.kin.h_s = 0.0;
+        w.kin.rings_end.clone_from(&w.kin.rings_start);
+        w.kin.anchors_end.clone_from(&w.kin.anchors_start);
+        let input = ForceInput {
+            around: core.around,
+            along: core.along,
+            materials: &core.materials,
+            springs: &core.springs,
+            kin: &w.kin,
+        };
+        w.x_new.resize(core.x.len(), 0.0);
+        forces::position_accel(&input, &mut w.force, core.t_s, &core.x, &mut w.x_new);
+        forces::add_velocity_accel(&input, &w.force, &core.v, &mut w.x_new);
+        w.x_new.iter().sum()
+    }
+
+    /// One constraint pass (with its re-check passes) on a copy of the current state, as after
+    /// an accepted step, for benchmarks and profiling. Returns the largest correction, metres.
+    pub fn enforce_constraints_once(&mut self, poses: &mut dyn PoseSource, h_s: f32) -> f32 {
+        self.ensure_start(poses);
+        let core = &self.core;
+        let w = &mut self.work;
+        w.x_new.clone_from(&core.x);
+        w.v_new.clone_from(&core.v);
+        forces::assemble_grid(
+            core.around,
+            core.along,
+            &w.x_new,
+            &w.kin.rings_start,
+            &w.kin.rings_start,
+            0.0,
+            &mut w.force.grid,
+        );
+        forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
+        let max_fat = core.materials.fat_m.iter().fold(0.0f32, |a, b| a.max(*b));
+        let input = ConstraintInput {
+            around: core.around,
+            along: core.along,
+            shapes_end: &w.shapes_start,
+            shapes_start: &w.shapes_start,
+            h_s,
+            fat_m: &core.materials.fat_m,
+            max_fat_m: max_fat,
+            k_parallel: core.k_parallel,
+            k_perpendicular: core.k_perpendicular,
+            max_speed_m_per_s: 0.0,
+        };
+        constraints::enforce(
+            &input,
+            &mut w.broad,
+            &mut w.force.grid,
+            &w.normals,
+            &mut w.x_new,
+            &mut w.v_new,
+            None,
+            &mut w.touched,
+        )
+        .max_correction_m
+    }
+
     /// Number of candidate-list rebuilds of the constraint broadphase so far.
     pub fn broadphase_rebuilds(&self) -> u64 {
         self.work.broad.rebuilds
@@ -443,7 +512,14 @@ impl SurfaceModel {
             &mut w.touched,
         );
         let mut passes = 0;
-        let mut last_corrected = outcome.corrected;
+        let last_corrected = outcome.corrected;
+        // Corrections below this do not warrant another pass.
+        let negligible_m = 0.02 * core.epsilon_c_m;
+        let mut last_corrected = if outcome.max_correction_m > negligible_m {
+            last_corrected
+        } else {
+            0
+        };
         while last_corrected > 0 && passes < 4 {
             // Corrections turn their neighbours' normals, which moves those neighbours' fat
             // points: further passes over the corrected points and their neighbours with the
@@ -461,7 +537,11 @@ impl SurfaceModel {
                 Some(&w.recheck),
                 &mut w.touched,
             );
-            last_corrected = second.corrected;
+            last_corrected = if second.max_correction_m > negligible_m {
+                second.corrected
+            } else {
+                0
+            };
             outcome.max_component_m = outcome.max_component_m.max(second.max_component_m);
             if second.max_correction_m > outcome.max_correction_m {
                 outcome.max_correction_m = second.max_correction_m;
@@ -492,23 +572,6 @@ impl SurfaceModel {
             return Attempt::ConstraintRejected { retry_s: h_c };
         }
         w.last_constraint_reject = None;
-        if std::env::var_os("LEMAN_DEBUG_CONSTRAINTS").is_some() && outcome.max_correction_m > 0.004
-        {
-            let (f, s) = outcome.worst;
-            eprintln!(
-                "t {:.4} h {:.5} corr {:.4} point ({}, {}) shape {} {:?}",
-                t0,
-                h_s,
-                outcome.max_correction_m,
-                f as usize % core.around,
-                f as usize / core.around + 1,
-                s,
-                core.character
-                    .shapes
-                    .get(s as usize)
-                    .map(|s| (&s.name, s.primitive))
-            );
-        }
         Attempt::Accepted {
             next_s: p.next_step_s,
             forced: p.forced || outcome.max_component_m > core.epsilon_c_m,

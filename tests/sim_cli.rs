@@ -1,0 +1,131 @@
+//! `leman simulate` end to end: the binary runs an example character and prints the documented
+//! JSON object (docs/simulate.md); bad arguments fail with a message naming them.
+
+use std::process::Command;
+
+fn leman() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_leman"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c
+}
+
+#[test]
+fn simulate_prints_the_documented_json() {
+    let out = leman()
+        .args([
+            "simulate",
+            "arm_16",
+            "--seconds",
+            "0.3",
+            "--integrator",
+            "verlet",
+            "--json",
+        ])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    for key in [
+        "sim_seconds",
+        "wall_seconds",
+        "slowdown",
+        "steps",
+        "rejected_steps",
+        "max_penetration_m",
+        "nonfinite_events",
+        "skin_points",
+        "point_steps_per_second",
+    ] {
+        assert!(v[key].is_number(), "{key} missing in {v}");
+    }
+    assert!((v["sim_seconds"].as_f64().expect("number") - 0.3).abs() < 1e-6);
+    assert_eq!(v["skin_points"], 256);
+    assert!(v["steps"].as_u64().expect("number") > 10);
+    assert_eq!(v["nonfinite_events"], 0);
+    let min = v["step_secs"]["min"].as_f64().expect("number");
+    let max = v["step_secs"]["max"].as_f64().expect("number");
+    assert!(0.0 < min && min <= max, "{min} {max}");
+    let f = &v["phase_fraction"];
+    let sum = ["force", "constraints", "other"]
+        .iter()
+        .map(|k| f[k].as_f64().expect("number"))
+        .sum::<f64>();
+    assert!((sum - 1.0).abs() < 1e-6, "{f}");
+    let pps = v["point_steps_per_second"].as_f64().expect("number");
+    let expect =
+        256.0 * v["steps"].as_f64().expect("number") / v["wall_seconds"].as_f64().expect("number");
+    assert!((pps / expect - 1.0).abs() < 1e-9);
+}
+
+#[test]
+fn simulate_table_and_resolution_and_every_integrator() {
+    for integrator in ["euler", "rk2", "rk4"] {
+        let out = leman()
+            .args([
+                "simulate",
+                "penguin_16",
+                "--seconds",
+                "0.1",
+                "--integrator",
+                integrator,
+            ])
+            .output()
+            .expect("runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains("Timestep interval (ms)") && text.contains("% Constraints"),
+            "{text}"
+        );
+        assert!(text.contains(integrator));
+    }
+    let out = leman()
+        .args([
+            "simulate",
+            "penguin_16",
+            "--seconds",
+            "0.05",
+            "--resolution",
+            "12x10",
+            "--json",
+        ])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(v["skin_points"], 120);
+}
+
+#[test]
+fn simulate_bad_arguments_say_what_is_wrong() {
+    for (args, needle) in [
+        (vec!["simulate", "no_such_character"], "no_such_character"),
+        (
+            vec!["simulate", "arm_16", "--resolution", "12by3"],
+            "--resolution",
+        ),
+        (
+            vec!["simulate", "arm_16", "--integrator", "leapfrog"],
+            "--integrator",
+        ),
+        (vec!["simulate", "arm_16", "--motion", "dance"], "dance"),
+        (vec!["simulate", "arm_16", "--seconds", "0"], "--seconds"),
+    ] {
+        let out = leman().args(&args).output().expect("runs");
+        assert!(!out.status.success(), "{args:?} should fail");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
