@@ -20,8 +20,6 @@ use crate::character::{PROJECTION_TOLERANCE_M, Primitive, ShapeGeometry, ShapeIn
 
 /// Most candidates a point keeps; beyond that it tests every shape.
 const MAX_CANDIDATES: usize = 16;
-/// Corrections longer than this mark a point's neighbourhood for a re-check, metres.
-const RECHECK_M: f32 = 1e-4;
 /// Marker for "test every shape".
 const ALL_SHAPES: u8 = u8::MAX;
 
@@ -82,6 +80,8 @@ pub struct ConstraintInput<'a> {
     pub k_perpendicular: f32,
     /// Largest speed of any point in the candidate state (bounds its movement this step).
     pub max_speed_m_per_s: f32,
+    /// Corrections longer than this mark a point's neighbourhood for a re-check, metres.
+    pub recheck_m: f32,
 }
 
 impl Broadphase {
@@ -255,7 +255,7 @@ pub fn enforce(
             out.worst = (f as u32, last_shape as u32);
         }
         out.corrected += 1;
-        if d.length() > RECHECK_M {
+        if d.length() > input.recheck_m {
             touched.push(f as u32);
         }
         x[f] = p1.x;

@@ -302,6 +302,7 @@ impl SurfaceModel {
             k_parallel: core.k_parallel,
             k_perpendicular: core.k_perpendicular,
             max_speed_m_per_s: 0.0,
+            recheck_m: 0.1 * core.epsilon_c_m,
         };
         constraints::enforce(
             &input,
@@ -500,6 +501,7 @@ impl SurfaceModel {
             k_parallel: core.k_parallel,
             k_perpendicular: core.k_perpendicular,
             max_speed_m_per_s: max_speed2.sqrt(),
+            recheck_m: 0.1 * core.epsilon_c_m,
         };
         let mut outcome = constraints::enforce(
             &input,
@@ -514,13 +516,13 @@ impl SurfaceModel {
         let mut passes = 0;
         let last_corrected = outcome.corrected;
         // Corrections below this do not warrant another pass.
-        let negligible_m = 0.02 * core.epsilon_c_m;
+        let negligible_m = 0.1 * core.epsilon_c_m;
         let mut last_corrected = if outcome.max_correction_m > negligible_m {
             last_corrected
         } else {
             0
         };
-        while last_corrected > 0 && passes < 4 {
+        while last_corrected > 0 && passes < 3 {
             // Corrections turn their neighbours' normals, which moves those neighbours' fat
             // points: further passes over the corrected points and their neighbours with the
             // new normals, until nothing moves (at most 4).
