@@ -6,7 +6,9 @@
 //! - `prepare`: build + upload to GPU buffers;
 //! - `draw_and_wait`: encode both eye passes, submit, wait for the GPU;
 //! - `frame`: prepare + draw + wait (what the frame loop pays);
-//! - `frame_with_readback`: frame + copying the image back (offscreen/replay PNG path).
+//! - `frame_with_readback`: frame + copying the image back (offscreen/replay PNG path);
+//! - `draw_and_wait_640x360`: the same at a quarter of the pixels (how much is fill);
+//! - `draw_and_wait_skin_only`: without the 40 shapes (how much is their geometry).
 //!
 //! Run: `cargo bench --bench render` (criterion reports medians in its estimates). The bench
 //! also writes the frame it measured to `target/render_bench_torso_sbs.png`.
@@ -132,6 +134,49 @@ fn bench_render(c: &mut Criterion) {
                 .draw_composition(&target, &recipe, 0)
                 .expect("draw");
             renderer.read_image(&target).expect("read")
+        })
+    });
+    // Where the GPU time goes: the same frame at a quarter of the pixels (fill cost), and
+    // with only the skin (geometry cost of the 40 shapes).
+    let small = renderer
+        .create_target(WIDTH / 2, HEIGHT / 2)
+        .expect("small target");
+    let small_recipe = leman::stereo::Composition {
+        output_size_px: [WIDTH / 2, HEIGHT / 2],
+        passes: recipe
+            .passes
+            .iter()
+            .map(|p| leman::stereo::EyePass {
+                viewport: leman::stereo::ViewportPx {
+                    x: p.viewport.x / 2,
+                    y: p.viewport.y / 2,
+                    width: p.viewport.width / 2,
+                    height: p.viewport.height / 2,
+                },
+                ..*p
+            })
+            .collect(),
+        ..recipe.clone()
+    };
+    renderer.prepare(&scene);
+    group.bench_function("draw_and_wait_640x360", |b| {
+        b.iter(|| {
+            renderer
+                .draw_composition(&small, &small_recipe, 0)
+                .expect("draw");
+            renderer.wait_idle().expect("wait");
+        })
+    });
+    let mut skin_only = scene.clone();
+    skin_only.layers.muscles = false;
+    skin_only.layers.bones = false;
+    renderer.prepare(&skin_only);
+    group.bench_function("draw_and_wait_skin_only", |b| {
+        b.iter(|| {
+            renderer
+                .draw_composition(&target, &recipe, 0)
+                .expect("draw");
+            renderer.wait_idle().expect("wait");
         })
     });
     group.finish();

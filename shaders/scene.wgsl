@@ -49,11 +49,7 @@ fn vs_lit(v: LitIn) -> LitOut {
     return out;
 }
 
-@fragment
-fn fs_lit(in: LitOut) -> @location(0) vec4<f32> {
-    if !row_visible(in.clip.y) {
-        discard;
-    }
+fn shade(in: LitOut) -> vec4<f32> {
     var n = normalize(in.normal);
     let to_eye = normalize(pass_u.eye_position_world.xyz - in.world);
     // Two-sided lighting: a surface seen from behind is lit as its visible side.
@@ -67,6 +63,21 @@ fn fs_lit(in: LitOut) -> @location(0) vec4<f32> {
     let specular = pow(max(dot(n, half_vector), 0.0), 40.0) * 0.25;
     let light = 0.12 + 0.45 * headlight + 0.55 * key_diffuse;
     return vec4<f32>(in.color.rgb * light + vec3<f32>(specular), in.color.a);
+}
+
+// Without a discard (every row): lets the GPU test depth before shading.
+@fragment
+fn fs_lit(in: LitOut) -> @location(0) vec4<f32> {
+    return shade(in);
+}
+
+// Row-interleaved passes: fragments on the other eye's rows are discarded.
+@fragment
+fn fs_lit_rows(in: LitOut) -> @location(0) vec4<f32> {
+    if !row_visible(in.clip.y) {
+        discard;
+    }
+    return shade(in);
 }
 
 struct LineIn {
@@ -89,6 +100,11 @@ fn vs_line(v: LineIn) -> LineOut {
 
 @fragment
 fn fs_line(in: LineOut) -> @location(0) vec4<f32> {
+    return in.color;
+}
+
+@fragment
+fn fs_line_rows(in: LineOut) -> @location(0) vec4<f32> {
     if !row_visible(in.clip.y) {
         discard;
     }

@@ -80,6 +80,18 @@ impl FrameGeometry {
     pub fn build(scene: &Scene) -> Self {
         let mut g = Self::default();
         let layers = scene.layers;
+        // The skin first: when opaque it hides most of the shapes inside it, and drawing it
+        // before them lets the depth test reject their fragments early.
+        if let Some(skin) = scene.skin.as_ref().filter(|_| layers.skin) {
+            // NaN opacity counts as opaque.
+            let opaque = skin.color.a >= 0.999 || skin.color.a.is_nan();
+            let batch = if opaque {
+                &mut g.opaque
+            } else {
+                &mut g.translucent
+            };
+            push_mesh(batch, &mut g.sanitized, &skin.mesh, None, skin.color);
+        }
         if let Some(grid) = scene.floor_grid.filter(|_| layers.floor_grid) {
             let spacing = grid.spacing_m.max(1e-3);
             let half = grid.half_extent_m.clamp(0.0, 1e4);
@@ -232,16 +244,6 @@ impl FrameGeometry {
         }
         for &(s, color) in &scene.extra_lines {
             g.push_segment(s, color);
-        }
-        if let Some(skin) = scene.skin.as_ref().filter(|_| layers.skin) {
-            // NaN opacity counts as opaque.
-            let opaque = skin.color.a >= 0.999 || skin.color.a.is_nan();
-            let batch = if opaque {
-                &mut g.opaque
-            } else {
-                &mut g.translucent
-            };
-            push_mesh(batch, &mut g.sanitized, &skin.mesh, None, skin.color);
         }
         g
     }

@@ -318,7 +318,7 @@ pub struct Renderer {
     pipeline_layout: wgpu::PipelineLayout,
     uniform_buffer: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
-    pipelines: HashMap<(PipelineKind, wgpu::ColorWrites), wgpu::RenderPipeline>,
+    pipelines: HashMap<(PipelineKind, wgpu::ColorWrites, bool), wgpu::RenderPipeline>,
     frame: FrameBuffers,
     background: Rgba,
     key_light_direction: Vec3,
@@ -605,7 +605,7 @@ impl Renderer {
                 PipelineKind::Lines,
                 PipelineKind::LitTranslucent,
             ] {
-                self.ensure_pipeline(kind, color_writes(p.color_mask));
+                self.ensure_pipeline(kind, color_writes(p.color_mask), p.row_parity.is_some());
             }
         }
         let mut encoder = self
@@ -698,7 +698,8 @@ impl Renderer {
             ];
             for (kind, vertices, indices, count) in draws {
                 let (Some(pipeline), Some(vertices)) = (
-                    self.pipelines.get(&(kind, color_writes(p.color_mask))),
+                    self.pipelines
+                        .get(&(kind, color_writes(p.color_mask), p.row_parity.is_some())),
                     vertices,
                 ) else {
                     continue;
@@ -745,8 +746,8 @@ impl Renderer {
         &self.queue
     }
 
-    fn ensure_pipeline(&mut self, kind: PipelineKind, mask: wgpu::ColorWrites) {
-        if self.pipelines.contains_key(&(kind, mask)) {
+    fn ensure_pipeline(&mut self, kind: PipelineKind, mask: wgpu::ColorWrites, rows: bool) {
+        if self.pipelines.contains_key(&(kind, mask, rows)) {
             return;
         }
         let lit_attributes =
@@ -755,7 +756,7 @@ impl Renderer {
         let (vs, fs, layout, topology) = match kind {
             PipelineKind::LitOpaque | PipelineKind::LitTranslucent => (
                 "vs_lit",
-                "fs_lit",
+                if rows { "fs_lit_rows" } else { "fs_lit" },
                 wgpu::VertexBufferLayout {
                     array_stride: std::mem::size_of::<LitVertex>() as u64,
                     step_mode: wgpu::VertexStepMode::Vertex,
@@ -765,7 +766,7 @@ impl Renderer {
             ),
             PipelineKind::Lines => (
                 "vs_line",
-                "fs_line",
+                if rows { "fs_line_rows" } else { "fs_line" },
                 wgpu::VertexBufferLayout {
                     array_stride: std::mem::size_of::<LineVertex>() as u64,
                     step_mode: wgpu::VertexStepMode::Vertex,
@@ -816,6 +817,6 @@ impl Renderer {
                 multiview_mask: None,
                 cache: None,
             });
-        self.pipelines.insert((kind, mask), pipeline);
+        self.pipelines.insert((kind, mask, rows), pipeline);
     }
 }
