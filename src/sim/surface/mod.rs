@@ -783,8 +783,15 @@ impl Core {
     }
 }
 
+/// First step: the fixed step for Euler and RK4; for the adaptive methods a quarter of the
+/// largest step (the controller corrects it within a step or two; starting from the Euler step
+/// would only report that as the smallest step).
 fn initial_step(kind: IntegratorKind, t: &Tolerances) -> f64 {
-    Integrator::new(kind, *t).initial_step_s()
+    if kind.is_adaptive() {
+        (0.25 * t.max_step_s).clamp(t.min_step_s, t.max_step_s.max(t.min_step_s))
+    } else {
+        Integrator::new(kind, *t).initial_step_s()
+    }
 }
 
 /// Rest curvature `B⁰_ij = n̂·D_ij r` of a full grid (0 on the fixed rows).
