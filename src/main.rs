@@ -7,10 +7,19 @@ use clap::{Parser, Subcommand};
 
 /// leman: build and animate elastically deformable layered characters in head-tracked stereo.
 #[derive(Debug, Parser)]
-#[command(name = "leman", version, about, long_about = None)]
+#[command(
+    name = "leman",
+    version,
+    about,
+    long_about = None,
+    args_conflicts_with_subcommands = true
+)]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// With no subcommand, `leman [OPTIONS]` is `leman run [OPTIONS]`.
+    #[command(flatten)]
+    run: cmd::run::Args,
 }
 
 #[derive(Debug, Subcommand)]
@@ -40,10 +49,7 @@ fn main() -> anyhow::Result<()> {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
-    match cli
-        .command
-        .unwrap_or(Command::Run(cmd::run::Args::default()))
-    {
+    match cli.command.unwrap_or(Command::Run(cli.run)) {
         Command::Run(args) => cmd::run::run(args),
         Command::Devices(args) => cmd::devices::run(args),
         Command::Record(args) => cmd::record::run(args),
