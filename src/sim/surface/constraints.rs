@@ -32,6 +32,13 @@ pub struct Broadphase {
     ref_radii: Vec<f32>,
     moved_m: f32,
     valid: bool,
+    /// Per candidate slot: `F` of the last exact evaluation (NaN: none) and where (shape space).
+    clear_value: Vec<f32>,
+    clear_at: Vec<Vec3>,
+    /// Per shape: the primitive when the slots were filled.
+    ref_primitives: Vec<Primitive>,
+    /// Per shape this pass: Lipschitz bound of `F` in shape space, 1/m (0: no caching).
+    lipschitz_per_m: Vec<f32>,
     /// Margin, metres: larger means fewer rebuilds and more candidates.
     pub margin_m: f32,
     /// Rebuilds so far (for tests and reports).
@@ -101,6 +108,7 @@ impl Broadphase {
             self.valid = false;
         }
         if self.valid && self.moved_m + shape_moved <= self.margin_m && self.count.len() == free {
+            self.update_lipschitz(shapes);
             return;
         }
         self.rebuilds += 1;
@@ -113,6 +121,14 @@ impl Broadphase {
         self.ref_radii
             .extend(shapes.iter().map(|s| s.bound_radius_m));
         self.cand.resize(free * MAX_CANDIDATES, 0);
+        self.clear_value.clear();
+        self.clear_value.resize(free * MAX_CANDIDATES, f32::NAN);
+        self.clear_at.clear();
+        self.clear_at.resize(free * MAX_CANDIDATES, Vec3::ZERO);
+        self.ref_primitives.clear();
+        self.ref_primitives
+            .extend(shapes.iter().map(|s| s.geometry.primitive));
+        self.update_lipschitz(shapes);
         self.count.resize(free, 0);
         let grow = input.max_fat_m + self.margin_m;
         let too_many = shapes.len() >= usize::from(ALL_SHAPES);
@@ -134,6 +150,44 @@ impl Broadphase {
             }
             self.count[f] = if overflow { ALL_SHAPES } else { c as u8 };
         }
+    }
+
+    /// Per shape: the Lipschitz bound that lets a cached exact value stand in for a new
+    /// evaluation, or 0 when the shape does not qualify (see [`superellipsoid_lipschitz_per_m`])
+    /// or its primitive changed since the cache was filled.
+    fn update_lipschitz(&mut self, shapes: &[ShapeInstance]) {
+        self.lipschitz_per_m.clear();
+        self.lipschitz_per_m
+            .extend(shapes.iter().enumerate().map(|(k, s)| {
+                if self.ref_primitives.get(k) == Some(&s.geometry.primitive) {
+                    superellipsoid_lipschitz_per_m(&s.geometry)
+                } else {
+                    0.0
+                }
+            }));
+    }
+}
+
+/// Safety margin on `F` for using a cached value (far above `f32` evaluation error).
+const CACHE_MARGIN: f32 = 1e-4;
+
+/// For a superellipsoid with `e1, e2 ≤ 2`: a bound `L` with `|F(p) − F(p')| ≤ L |p − p'|`
+/// in rest space (before its deformations), 1/m; 0 for anything else.
+///
+/// Why: `G = F + 1` is then the nested norm `‖(‖(x, z)‖_{2/e2}, y)‖_{2/e1}` of `p / radii`
+/// (both exponents ≥ 1, so a convex gauge) and is at most the 1-norm, which is at most
+/// `√3` times the Euclidean norm. A norm is Lipschitz with its bound: `|G(u) − G(u')| ≤
+/// √3 |u − u'|`, and `|u − u'| ≤ |p − p'| / min(radii)`. So a point whose `F` was `F₀` at
+/// `p₀` is still outside while `F₀ − L |p − p₀| > 0`: the constraint pass skips the
+/// exact evaluation (the `pow` calls) for such points.
+pub fn superellipsoid_lipschitz_per_m(geometry: &ShapeGeometry) -> f32 {
+    match geometry.primitive {
+        Primitive::Superellipsoid { radii_m, e1, e2 }
+            if e1 > 0.0 && e2 > 0.0 && e1 <= 2.0 && e2 <= 2.0 && radii_m.min_element() > 0.0 =>
+        {
+            3.0f32.sqrt() / radii_m.min_element()
+        }
+        _ => 0.0,
     }
 }
 
@@ -186,9 +240,14 @@ pub fn enforce(
         let mut moved = false;
         let mut last_normal = Vec3::ZERO;
         let mut last_shape = usize::MAX;
-        // Two rounds so a point pushed out of one muscle into an overlapping one is fixed too.
+        // Up to four rounds so a point pushed out of one muscle into an overlapping one is
+        // fixed too. A later round stops once it passes the previous round's last change
+        // without a change of its own: the remaining shapes would see the same fat point as
+        // in the previous round, which found nothing there (same result, fewer tests).
+        let mut previous_last_change = usize::MAX;
         for _round in 0..4 {
             let mut changed = false;
+            let mut last_change = 0usize;
             let list: &[u8] = if count == ALL_SHAPES {
                 &[]
             } else {
@@ -200,6 +259,9 @@ pub fn enforce(
                 list.len()
             };
             for t in 0..n_tests {
+                if !changed && t > previous_last_change {
+                    break;
+                }
                 let s_idx = if count == ALL_SHAPES {
                     t
                 } else {
@@ -214,7 +276,35 @@ pub fn enforce(
                 if outside_box(&s.geometry, local) {
                     continue;
                 }
-                let (value, grad) = super::fastshape::value_and_gradient(&s.geometry, local);
+                // Cached exact value at a nearby point, with the Lipschitz bound: still
+                // outside, so the evaluation below would find `F ≥ 0` too.
+                // (In rest space, where the bound holds, so also for deformed shapes.)
+                let lipschitz = broad.lipschitz_per_m.get(s_idx).copied().unwrap_or(0.0);
+                let slot = f * MAX_CANDIDATES + t;
+                let cacheable = count != ALL_SHAPES && lipschitz > 0.0;
+                let rest = if cacheable {
+                    super::fastshape::superellipsoid_rest(&s.geometry, local)
+                } else {
+                    None
+                };
+                let (value, grad) = if let Some((p_rest, jac)) = rest {
+                    let f0 = broad.clear_value[slot];
+                    if f0 > 0.0
+                        && f0 - lipschitz * (p_rest - broad.clear_at[slot]).length() > CACHE_MARGIN
+                    {
+                        continue;
+                    }
+                    let (value, grad) = super::fastshape::superellipsoid_value_and_gradient(
+                        &s.geometry,
+                        p_rest,
+                        jac,
+                    );
+                    broad.clear_value[slot] = value;
+                    broad.clear_at[slot] = p_rest;
+                    (value, grad)
+                } else {
+                    super::fastshape::value_and_gradient(&s.geometry, local)
+                };
                 if value >= 0.0 {
                     continue;
                 }
@@ -235,10 +325,12 @@ pub fn enforce(
                 last_shape = s_idx;
                 moved = true;
                 changed = true;
+                last_change = t;
             }
             if !changed {
                 break;
             }
+            previous_last_change = last_change;
         }
         if !moved {
             continue;
@@ -394,5 +486,63 @@ pub fn neighbourhood(
             add(f - m);
         }
         add(f + m);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lipschitz_bound_holds_for_convex_superellipsoids() {
+        let shapes = [
+            (Vec3::new(0.08, 0.15, 0.1), 0.6, 1.4),
+            (Vec3::new(0.1, 0.2, 0.12), 1.0, 1.0),
+            (Vec3::new(0.05, 0.3, 0.05), 0.3, 0.8),
+            (Vec3::new(0.12, 0.1, 0.09), 1.8, 0.4),
+            (Vec3::new(0.07, 0.12, 0.06), 2.0, 2.0),
+            (Vec3::new(0.07, 0.12, 0.06), 0.1, 0.1),
+        ];
+        let mut state: u32 = 5;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+        };
+        for (radii_m, e1, e2) in shapes {
+            let g = ShapeGeometry::new(Primitive::Superellipsoid { radii_m, e1, e2 }, &[]);
+            let lipschitz = superellipsoid_lipschitz_per_m(&g);
+            assert!(lipschitz > 0.0);
+            let mut largest_ratio = 0.0f32;
+            for i in 0..20_000 {
+                let p = Vec3::new(next(), next(), next()) * 0.3;
+                let scale = if i % 2 == 0 { 0.01 } else { 0.2 };
+                let q = p + Vec3::new(next(), next(), next()) * scale;
+                let dist = (p - q).length();
+                let change = (g.value(p) - g.value(q)).abs();
+                assert!(
+                    change <= lipschitz * dist * (1.0 + 1e-4) + 1e-5,
+                    "{p} {q}: {change} > {lipschitz}·{dist}"
+                );
+                if dist > 1e-3 {
+                    largest_ratio = largest_ratio.max(change / dist);
+                }
+            }
+            // The bound is not vacuous: it is within a small factor of what is seen.
+            assert!(
+                largest_ratio >= 0.3 * lipschitz,
+                "{largest_ratio} vs {lipschitz}"
+            );
+        }
+        let pinched = ShapeGeometry::new(
+            Primitive::Superellipsoid {
+                radii_m: Vec3::splat(0.1),
+                e1: 2.5,
+                e2: 1.0,
+            },
+            &[],
+        );
+        assert_eq!(superellipsoid_lipschitz_per_m(&pinched), 0.0);
+        let sphere = ShapeGeometry::new(Primitive::Sphere { radius_m: 0.1 }, &[]);
+        assert_eq!(superellipsoid_lipschitz_per_m(&sphere), 0.0);
     }
 }

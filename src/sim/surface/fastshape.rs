@@ -30,6 +30,41 @@ pub fn value_and_gradient(geometry: &ShapeGeometry, p_shape: Vec3) -> (f32, Vec3
     (v, jac.transpose() * g_rest)
 }
 
+/// A superellipsoid's rest-space point for `p_shape` and `∂p_rest/∂p_shape` (identity when
+/// undeformed); `None` for other primitives.
+#[inline]
+pub fn superellipsoid_rest(geometry: &ShapeGeometry, p_shape: Vec3) -> Option<(Vec3, Mat3)> {
+    let Primitive::Superellipsoid { .. } = geometry.primitive else {
+        return None;
+    };
+    let mut q = p_shape;
+    let mut jac = Mat3::IDENTITY;
+    for d in geometry.deformations().iter().rev() {
+        let (p, j) = d.invert(q);
+        jac = j * jac;
+        q = p;
+    }
+    Some((q, jac))
+}
+
+/// [`value_and_gradient`] from the parts [`superellipsoid_rest`] returned (same result).
+#[inline]
+pub fn superellipsoid_value_and_gradient(
+    geometry: &ShapeGeometry,
+    p_rest: Vec3,
+    jac: Mat3,
+) -> (f32, Vec3) {
+    let Primitive::Superellipsoid { radii_m, e1, e2 } = geometry.primitive else {
+        return (f32::NAN, Vec3::ZERO);
+    };
+    let (v, g_rest) = superellipsoid(p_rest, radii_m, e1, e2);
+    if geometry.is_undeformed() {
+        (v, g_rest)
+    } else {
+        (v, jac.transpose() * g_rest)
+    }
+}
+
 #[inline]
 fn pow0(v: f32, e: f32) -> f32 {
     if v > 0.0 { v.powf(e) } else { 0.0 }
@@ -60,8 +95,12 @@ fn superellipsoid(p: Vec3, radii: Vec3, e1: f32, e2: f32) -> (f32, Vec3) {
         );
         return (s * root - 1.0, grad);
     }
-    let px = pow0(qx, 2.0 / e2);
-    let pz = pow0(qz, 2.0 / e2);
+    // e2 = 1 (round cross-sections, common in the examples): the square needs no pow.
+    let (px, pz) = if e2 == 1.0 {
+        (qx * qx, qz * qz)
+    } else {
+        (pow0(qx, 2.0 / e2), pow0(qz, 2.0 / e2))
+    };
     let py = pow0(qy, 2.0 / e1);
     let big_a = px + pz;
     let a_pow = pow0(big_a, e2 / e1);
