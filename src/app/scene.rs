@@ -7,8 +7,9 @@
 //! screen already live there. So the stereo module's views (made in the calibration's frame)
 //! apply unchanged.
 
-use crate::character::{Character, Posture, Primitive, SkeletonPose};
+use crate::character::{Character, Posture, SkeletonPose};
 use crate::pose::Pose;
+use crate::render::adapter::{TessellationDetail, kind_from_name, tessellate_primitive};
 use crate::render::mesh::TriMesh;
 use crate::render::scene::{
     FloorGrid, Layers, Rgba, Scene, Segment, ShapeInstance as RenderShape, ShapeKind,
@@ -30,24 +31,14 @@ impl ShapeMeshes {
             rest: character
                 .shapes
                 .iter()
-                .map(|s| Arc::new(primitive_mesh(&s.primitive)))
+                .map(|s| {
+                    Arc::new(tessellate_primitive(
+                        &s.primitive,
+                        TessellationDetail::default(),
+                    ))
+                })
                 .collect(),
         }
-    }
-}
-
-/// A mesh of a primitive in its rest frame (centred on the origin, +Y the axis).
-pub fn primitive_mesh(primitive: &Primitive) -> TriMesh {
-    match *primitive {
-        Primitive::Sphere { radius_m } => TriMesh::sphere(radius_m, 24, 12),
-        Primitive::Superellipsoid { radii_m, e1, e2 } => {
-            TriMesh::superellipsoid(radii_m, e1, e2, 24, 16)
-        }
-        Primitive::Cylinder {
-            radius_m,
-            half_length_m,
-        } => TriMesh::cylinder(radius_m, 2.0 * half_length_m, 20)
-            .transformed(Mat4::from_translation(Vec3::new(0.0, -half_length_m, 0.0))),
     }
 }
 
@@ -66,21 +57,6 @@ pub fn skin_indices(around: u32, along: u32) -> Vec<u32> {
         }
     }
     indices
-}
-
-/// Whether a shape is drawn as bone (its name says so) or muscle.
-pub fn shape_kind(name: &str) -> ShapeKind {
-    let lower = name.to_ascii_lowercase();
-    if [
-        "bone", "skull", "rib", "spine", "pelvis", "femur", "humerus",
-    ]
-    .iter()
-    .any(|w| lower.contains(w))
-    {
-        ShapeKind::Bone
-    } else {
-        ShapeKind::Muscle
-    }
 }
 
 /// What one frame's scene is made from.
@@ -156,7 +132,7 @@ pub fn build_scene(inputs: &SceneInputs<'_>) -> Scene {
                 .collect();
             Arc::new(TriMesh::from_triangles(positions, rest.indices.clone()))
         };
-        let kind = shape_kind(&shape.name);
+        let kind = kind_from_name(&shape.name);
         shapes.push(RenderShape {
             mesh,
             world_from_shape: vehicle_from_world * world_from_shape,
@@ -289,6 +265,7 @@ fn tissue_segments(inputs: &SceneInputs<'_>) -> Vec<Segment> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::character::Primitive;
 
     #[test]
     fn skin_triangles_cover_the_grid_and_face_outward() {
@@ -315,24 +292,30 @@ mod tests {
 
     #[test]
     fn primitive_meshes_are_centred_and_sized() {
-        let c = primitive_mesh(&Primitive::Cylinder {
-            radius_m: 0.05,
-            half_length_m: 0.2,
-        });
+        let c = tessellate_primitive(
+            &Primitive::Cylinder {
+                radius_m: 0.05,
+                half_length_m: 0.2,
+            },
+            TessellationDetail::default(),
+        );
         let (lo, hi) = c.positions.iter().fold(
             (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
             |(lo, hi), p| (lo.min(*p), hi.max(*p)),
         );
         assert!((lo.y + 0.2).abs() < 1e-5 && (hi.y - 0.2).abs() < 1e-5);
         assert!((hi.x - 0.05).abs() < 1e-3);
-        let s = primitive_mesh(&Primitive::Sphere { radius_m: 0.1 });
+        let s = tessellate_primitive(
+            &Primitive::Sphere { radius_m: 0.1 },
+            TessellationDetail::default(),
+        );
         assert!(s.positions.iter().all(|p| (p.length() - 0.1).abs() < 1e-4));
     }
 
     #[test]
     fn bones_are_told_from_muscles_by_name() {
-        assert_eq!(shape_kind("left femur"), ShapeKind::Bone);
-        assert_eq!(shape_kind("Ribcage"), ShapeKind::Bone);
-        assert_eq!(shape_kind("biceps"), ShapeKind::Muscle);
+        assert_eq!(kind_from_name("left femur"), ShapeKind::Bone);
+        assert_eq!(kind_from_name("Ribcage"), ShapeKind::Bone);
+        assert_eq!(kind_from_name("biceps"), ShapeKind::Muscle);
     }
 }
