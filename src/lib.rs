@@ -16,5 +16,7 @@ pub mod pose;
 pub mod render;
 pub mod sim;
 pub mod stereo;
+#[cfg(test)]
+mod test_noise;
 pub mod tracking;
 pub mod ui;

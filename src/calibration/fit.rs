@@ -379,19 +379,7 @@ pub fn fit_screen(samples: &CornerSamples, options: &FitOptions) -> Result<Scree
 mod tests {
     use super::*;
 
-    /// Deterministic noise in [−1, 1].
-    pub(crate) struct Noise(pub u64);
-    impl Noise {
-        pub fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 % 2_000_001) as f32 / 1_000_000.0 - 1.0
-        }
-        pub fn vec(&mut self) -> Vec3 {
-            Vec3::new(self.next(), self.next(), self.next())
-        }
-    }
+    use crate::test_noise::Noise;
 
     fn known_screen() -> ScreenRect {
         // A 0.53 x 0.30 m monitor, tilted back 15 degrees and turned 20 degrees, in a tracker

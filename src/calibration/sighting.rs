@@ -152,15 +152,7 @@ mod tests {
     use crate::calibration::screen::ScreenRect;
     use glam::Quat;
 
-    struct Noise(u64);
-    impl Noise {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 % 2_000_001) as f32 / 1_000_000.0 - 1.0
-        }
-    }
+    use crate::test_noise::Noise;
 
     /// The glasses' sensor sits on the frame above the nose: eyes 3 cm below, 2 cm behind it.
     fn truth() -> HeadEyes {

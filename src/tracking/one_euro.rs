@@ -182,16 +182,7 @@ impl PoseFilter {
 mod tests {
     use super::*;
 
-    /// Deterministic noise in [−1, 1] (xorshift), so the tests need no RNG crate.
-    struct Noise(u64);
-    impl Noise {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 % 2_000_001) as f32 / 1_000_000.0 - 1.0
-        }
-    }
+    use crate::test_noise::Noise;
 
     fn rms(v: &[f32]) -> f32 {
         (v.iter().map(|x| x * x).sum::<f32>() / v.len() as f32).sqrt()
