@@ -272,49 +272,15 @@ impl SurfaceModel {
         w.x_new.iter().sum()
     }
 
-    /// One constraint pass (with its re-check passes) on a copy of the current state, as after
-    /// an accepted step, for benchmarks and profiling. Returns the largest correction, metres.
+    /// The constraint phase (a full pass and its re-check passes) on a copy of the current state,
+    /// as after an accepted step, for benchmarks and profiling. Returns the largest correction, metres.
     pub fn enforce_constraints_once(&mut self, poses: &mut dyn PoseSource, h_s: f32) -> f32 {
         self.ensure_start(poses);
         let core = &self.core;
         let w = &mut self.work;
         w.x_new.clone_from(&core.x);
         w.v_new.clone_from(&core.v);
-        forces::assemble_grid(
-            core.around,
-            core.along,
-            &w.x_new,
-            &w.kin.rings_start,
-            &w.kin.rings_start,
-            0.0,
-            &mut w.force.grid,
-        );
-        forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
-        let max_fat = core.materials.fat_m.iter().fold(0.0f32, |a, b| a.max(*b));
-        let input = ConstraintInput {
-            around: core.around,
-            along: core.along,
-            shapes_end: &w.shapes_start,
-            shapes_start: &w.shapes_start,
-            h_s,
-            fat_m: &core.materials.fat_m,
-            max_fat_m: max_fat,
-            k_parallel: core.k_parallel,
-            k_perpendicular: core.k_perpendicular,
-            max_speed_m_per_s: 0.0,
-            recheck_m: 0.1 * core.epsilon_c_m,
-        };
-        constraints::enforce(
-            &input,
-            &mut w.broad,
-            &mut w.force.grid,
-            &w.normals,
-            &mut w.x_new,
-            &mut w.v_new,
-            None,
-            &mut w.touched,
-        )
-        .max_correction_m
+        constrain_candidate(core, w, CandidateTime::Start, h_s, 0.0).max_correction_m
     }
 
     /// Number of candidate-list rebuilds of the constraint broadphase so far.
@@ -479,77 +445,8 @@ impl SurfaceModel {
         }
         // Constraints on the candidate.
         let c_start = clock.map(|c| c.now());
-        forces::assemble_grid(
-            core.around,
-            core.along,
-            &w.x_new,
-            &w.kin.rings_end,
-            &w.kin.rings_end,
-            0.0,
-            &mut w.force.grid,
-        );
-        forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
-        let max_fat = core.materials.fat_m.iter().fold(0.0f32, |a, b| a.max(*b));
-        let input = ConstraintInput {
-            around: core.around,
-            along: core.along,
-            shapes_end: &w.shapes_end,
-            shapes_start: &w.shapes_start,
-            h_s: h_s as f32,
-            fat_m: &core.materials.fat_m,
-            max_fat_m: max_fat,
-            k_parallel: core.k_parallel,
-            k_perpendicular: core.k_perpendicular,
-            max_speed_m_per_s: max_speed2.sqrt(),
-            recheck_m: 0.1 * core.epsilon_c_m,
-        };
-        let mut outcome = constraints::enforce(
-            &input,
-            &mut w.broad,
-            &mut w.force.grid,
-            &w.normals,
-            &mut w.x_new,
-            &mut w.v_new,
-            None,
-            &mut w.touched,
-        );
-        let mut passes = 0;
-        let last_corrected = outcome.corrected;
-        // Corrections below this do not warrant another pass.
-        let negligible_m = 0.1 * core.epsilon_c_m;
-        let mut last_corrected = if outcome.max_correction_m > negligible_m {
-            last_corrected
-        } else {
-            0
-        };
-        while last_corrected > 0 && passes < 3 {
-            // Corrections turn their neighbours' normals, which moves those neighbours' fat
-            // points: further passes over the corrected points and their neighbours with the
-            // new normals, until nothing moves (at most 4).
-            passes += 1;
-            forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
-            constraints::neighbourhood(core.around, free, &w.touched, &mut w.flags, &mut w.recheck);
-            let second = constraints::enforce(
-                &input,
-                &mut w.broad,
-                &mut w.force.grid,
-                &w.normals,
-                &mut w.x_new,
-                &mut w.v_new,
-                Some(&w.recheck),
-                &mut w.touched,
-            );
-            last_corrected = if second.max_correction_m > negligible_m {
-                second.corrected
-            } else {
-                0
-            };
-            outcome.max_component_m = outcome.max_component_m.max(second.max_component_m);
-            if second.max_correction_m > outcome.max_correction_m {
-                outcome.max_correction_m = second.max_correction_m;
-                outcome.worst = second.worst;
-            }
-        }
+        let outcome =
+            constrain_candidate(core, w, CandidateTime::End, h_s as f32, max_speed2.sqrt());
         if let (Some(start), Some(c)) = (c_start, clock) {
             report.phases.constraints += c.now().saturating_sub(start);
         }
@@ -1184,4 +1081,103 @@ impl DeformationModel for SurfaceModel {
     fn point_count(&self) -> usize {
         self.core.around * self.core.along
     }
+}
+
+/// Which end of the step the candidate state belongs to (the skeleton's fixed rings and shapes
+/// used for the constraint phase).
+#[derive(Debug, Clone, Copy)]
+enum CandidateTime {
+    /// The committed state (benchmarks): shapes and rings at the step's start.
+    Start,
+    /// A proposed step: shapes and rings at its end.
+    End,
+}
+
+/// The constraint phase on the candidate in `w.x_new`/`w.v_new`: one full pass, then re-check
+/// passes over corrected neighbourhoods with refreshed normals until nothing moves (at most 4
+/// passes in all). Shared by the real step and the benchmark hook so both measure the same work.
+fn constrain_candidate(
+    core: &Core,
+    w: &mut Work,
+    when: CandidateTime,
+    h_s: f32,
+    max_speed_m_per_s: f32,
+) -> constraints::ConstraintOutcome {
+    let free = core.free();
+    let (rings, shapes_end) = match when {
+        CandidateTime::Start => (&w.kin.rings_start, &w.shapes_start),
+        CandidateTime::End => (&w.kin.rings_end, &w.shapes_end),
+    };
+    forces::assemble_grid(
+        core.around,
+        core.along,
+        &w.x_new,
+        rings,
+        rings,
+        0.0,
+        &mut w.force.grid,
+    );
+    forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
+    let max_fat = core.materials.fat_m.iter().fold(0.0f32, |a, b| a.max(*b));
+    let input = ConstraintInput {
+        around: core.around,
+        along: core.along,
+        shapes_end,
+        shapes_start: &w.shapes_start,
+        h_s,
+        fat_m: &core.materials.fat_m,
+        max_fat_m: max_fat,
+        k_parallel: core.k_parallel,
+        k_perpendicular: core.k_perpendicular,
+        max_speed_m_per_s,
+        recheck_m: 0.1 * core.epsilon_c_m,
+    };
+    let mut outcome = constraints::enforce(
+        &input,
+        &mut w.broad,
+        &mut w.force.grid,
+        &w.normals,
+        &mut w.x_new,
+        &mut w.v_new,
+        None,
+        &mut w.touched,
+    );
+    let mut passes = 0;
+    let last_corrected = outcome.corrected;
+    // Corrections below this do not warrant another pass.
+    let negligible_m = 0.1 * core.epsilon_c_m;
+    let mut last_corrected = if outcome.max_correction_m > negligible_m {
+        last_corrected
+    } else {
+        0
+    };
+    while last_corrected > 0 && passes < 3 {
+        // Corrections turn their neighbours' normals, which moves those neighbours' fat
+        // points: further passes over the corrected points and their neighbours with the
+        // new normals, until nothing moves (at most 4).
+        passes += 1;
+        forces::grid_normals(core.around, core.along, &w.force.grid, &mut w.normals);
+        constraints::neighbourhood(core.around, free, &w.touched, &mut w.flags, &mut w.recheck);
+        let second = constraints::enforce(
+            &input,
+            &mut w.broad,
+            &mut w.force.grid,
+            &w.normals,
+            &mut w.x_new,
+            &mut w.v_new,
+            Some(&w.recheck),
+            &mut w.touched,
+        );
+        last_corrected = if second.max_correction_m > negligible_m {
+            second.corrected
+        } else {
+            0
+        };
+        outcome.max_component_m = outcome.max_component_m.max(second.max_component_m);
+        if second.max_correction_m > outcome.max_correction_m {
+            outcome.max_correction_m = second.max_correction_m;
+            outcome.worst = second.worst;
+        }
+    }
+    outcome
 }
