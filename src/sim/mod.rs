@@ -21,6 +21,7 @@
 //! pass `None` and they stay zero (and no clock is read at all).
 
 pub mod ode;
+pub mod simd;
 pub mod surface;
 
 use std::any::Any;

@@ -324,43 +324,31 @@ impl Integrator {
         let tol = self.tolerances;
         let h = h64 as f32;
         let half = 0.5 * h;
-        let [x_half, a_pos, a, v_mid, _, _] = &mut self.scratch;
-        // (7a) r_{t+h/2} = r_t + h/2 v_t, written into x_new's scratch twin.
-        for i in 0..x.len() {
-            x_half[i] = x[i] + half * v[i];
-        }
-        let t_half = t_s + 0.5 * h64;
-        sys.position_accel(t_half, x_half, a_pos);
-        // (7b) v_{t+h} = v_t
-        v_new.copy_from_slice(v);
+        let [x_half, a_pos, a, v_mid, inv_v_scale, _] = &mut self.scratch;
         let vel = sys.has_velocity_forces();
         let v_thr = tol.velocity_threshold_m_per_s as f32;
+        // (7a) r_{t+h/2} = r_t + h/2 v_t; (7b) v_{t+h} = v_t; (7c) of the first iteration
+        // v_{t+h/2} = v_t; and the eq. 8 velocity scales 1/max(|v_t|, v^thr), in one pass.
+        verlet_start(x, v, half, v_thr, x_half, v_new, v_mid, inv_v_scale);
+        let t_half = t_s + 0.5 * h64;
+        sys.position_accel(t_half, x_half, a_pos);
         let eps_v = tol.velocity_tolerance as f32;
         let max_iter = tol.max_velocity_iterations.max(1);
         let mut velocity_evals = 0;
         let mut converged = !vel;
         if !vel {
-            for i in 0..x.len() {
-                v_new[i] = v[i] + h * a_pos[i];
+            for ((vn, vi), ai) in v_new.iter_mut().zip(v).zip(a_pos.iter()) {
+                *vn = vi + h * ai;
             }
         } else {
+            a.copy_from_slice(a_pos);
             for it in 0..max_iter {
-                // (7c) v_{t+h/2} = (v_{t+h} + v_t)/2
-                for i in 0..x.len() {
-                    v_mid[i] = 0.5 * (v_new[i] + v[i]);
-                }
                 // (7d) a = M⁻¹ f(r_{t+h/2}, v_{t+h/2}); only the velocity part changes.
-                a.copy_from_slice(a_pos);
                 sys.add_velocity_accel(t_half, x_half, v_mid, a);
                 velocity_evals += 1;
-                // (7e-7g) v_old = v_{t+h}; v_{t+h} = v_t + h a; until scaled change ≤ ε_v.
-                let mut change = 0.0f32;
-                for i in 0..x.len() {
-                    let nv = v[i] + h * a[i];
-                    let d = (nv - v_new[i]).abs() / v[i].abs().max(v_thr);
-                    change = change.max(d);
-                    v_new[i] = nv;
-                }
+                // (7e-7g) v_old = v_{t+h}; v_{t+h} = v_t + h a; until scaled change ≤ ε_v;
+                // fused with the next iteration's (7c) and its reset of a to the position part.
+                let change = verlet_velocity_update(v, a_pos, inv_v_scale, h, a, v_new, v_mid);
                 if it > 0 && change <= eps_v {
                     converged = true;
                     break;
@@ -372,14 +360,7 @@ impl Integrator {
         }
         // (7h) r_{t+h} = r_{t+h/2} + h/2 v_{t+h}; (9, 11) Δ = ‖(r_t + h v_t − r_{t+h}) r_scale‖∞
         let r_thr = tol.position_threshold_m as f32;
-        let mut delta = 0.0f32;
-        for i in 0..x.len() {
-            let xn = x_half[i] + half * v_new[i];
-            x_new[i] = xn;
-            let euler = x[i] + h * v[i];
-            let d = (euler - xn).abs() / x[i].abs().max(r_thr);
-            delta = delta.max(d);
-        }
+        let delta = verlet_finish(x, v, x_half, v_new, half, h, r_thr, x_new);
         let mut ratio = f64::from(delta) / tol.position_tolerance;
         if !delta.is_finite() {
             ratio = f64::INFINITY;
@@ -560,4 +541,139 @@ pub fn integrate<S: SecondOrderSystem + ?Sized>(
         }
     }
     stats
+}
+
+// The Verlet passes over the state: each a single fused, vectorizable loop (see
+// `crate::sim::simd`), compiled for the baseline CPU and for AVX2.
+
+crate::sim::simd::multiversion! {
+    /// Verlet's first pass: `x_half = x + h/2 v`, `v_new = v_mid = v` and
+    /// `inv_v_scale = 1 / max(|v|, v_thr)` (the eq. 8 velocity scale as a reciprocal).
+    #[allow(clippy::too_many_arguments)]
+    fn verlet_start(
+        x: &[f32],
+        v: &[f32],
+        half: f32,
+        v_thr: f32,
+        x_half: &mut [f32],
+        v_new: &mut [f32],
+        v_mid: &mut [f32],
+        inv_v_scale: &mut [f32],
+    ) {
+        for (((x, v), (x_half, v_new)), (v_mid, inv_v_scale)) in x
+            .iter()
+            .zip(v)
+            .zip(x_half.iter_mut().zip(v_new.iter_mut()))
+            .zip(v_mid.iter_mut().zip(inv_v_scale.iter_mut()))
+        {
+            *x_half = x + half * v;
+            *v_new = *v;
+            *v_mid = *v;
+            *inv_v_scale = 1.0 / v.abs().max(v_thr);
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// One Verlet velocity iteration after the force evaluation (eq. 7e-7g, then 7c of the
+    /// next iteration): `v⁺ = v + h a`, returns `max |v⁺ − v_new| · inv_v_scale` (NaN or ∞
+    /// when any is), then `v_new = v⁺`, `v_mid = (v⁺ + v)/2` and `a = a_pos` (ready for the
+    /// next velocity evaluation).
+    #[allow(clippy::too_many_arguments)]
+    fn verlet_velocity_update(
+        v: &[f32],
+        a_pos: &[f32],
+        inv_v_scale: &[f32],
+        h: f32,
+        a: &mut [f32],
+        v_new: &mut [f32],
+        v_mid: &mut [f32],
+    ) -> f32 {
+        use crate::sim::simd::{LANES, MaxLanes};
+        let n = v.len();
+        let (a_pos, inv_v_scale) = (&a_pos[..n], &inv_v_scale[..n]);
+        let (a, v_new, v_mid) = (&mut a[..n], &mut v_new[..n], &mut v_mid[..n]);
+        let mut acc = MaxLanes::new();
+        let full = n - n % LANES;
+        #[inline(always)]
+        #[allow(clippy::too_many_arguments)]
+        fn one(
+            vi: f32,
+            api: f32,
+            si: f32,
+            h: f32,
+            ai: &mut f32,
+            vni: &mut f32,
+            vmi: &mut f32,
+        ) -> f32 {
+            let nv = vi + h * *ai;
+            let d = (nv - *vni).abs() * si;
+            *vni = nv;
+            *vmi = 0.5 * (nv + vi);
+            *ai = api;
+            d
+        }
+        for (c, ((((vc, apc), sc), (ac, vnc)), vmc)) in v[..full]
+            .chunks_exact(LANES)
+            .zip(a_pos[..full].chunks_exact(LANES))
+            .zip(inv_v_scale[..full].chunks_exact(LANES))
+            .zip(a[..full].chunks_exact_mut(LANES).zip(v_new[..full].chunks_exact_mut(LANES)))
+            .zip(v_mid[..full].chunks_exact_mut(LANES))
+            .enumerate()
+        {
+            let _ = c;
+            for l in 0..LANES {
+                let d = one(vc[l], apc[l], sc[l], h, &mut ac[l], &mut vnc[l], &mut vmc[l]);
+                acc.push(l, d);
+            }
+        }
+        for i in full..n {
+            let d = one(v[i], a_pos[i], inv_v_scale[i], h, &mut a[i], &mut v_new[i], &mut v_mid[i]);
+            acc.push(i, d);
+        }
+        acc.finish()
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// Verlet's last pass (eq. 7h, 9, 11): `x_new = x_half + h/2 v_new` and returns the scaled
+    /// embedded-Euler error `max |x + h v − x_new| / max(|x|, r_thr)` (NaN or ∞ when any is).
+    #[allow(clippy::too_many_arguments)]
+    fn verlet_finish(
+        x: &[f32],
+        v: &[f32],
+        x_half: &[f32],
+        v_new: &[f32],
+        half: f32,
+        h: f32,
+        r_thr: f32,
+        x_new: &mut [f32],
+    ) -> f32 {
+        use crate::sim::simd::{LANES, MaxLanes};
+        #[inline(always)]
+        #[allow(clippy::too_many_arguments)]
+        fn one(x: f32, v: f32, x_half: f32, v_new: f32, half: f32, h: f32, r_thr: f32, x_new: &mut f32) -> f32 {
+            let xn = x_half + half * v_new;
+            *x_new = xn;
+            let euler = x + h * v;
+            (euler - xn).abs() / x.abs().max(r_thr)
+        }
+        let mut acc = MaxLanes::new();
+        let (xc, xr) = x.as_chunks::<LANES>();
+        let (vc, vr) = v.as_chunks::<LANES>();
+        let (xhc, xhr) = x_half.as_chunks::<LANES>();
+        let (vnc, vnr) = v_new.as_chunks::<LANES>();
+        let (xnc, xnr) = x_new.as_chunks_mut::<LANES>();
+        for ((((x, v), x_half), v_new), x_new) in xc.iter().zip(vc).zip(xhc).zip(vnc).zip(xnc) {
+            for l in 0..LANES {
+                acc.push(l, one(x[l], v[l], x_half[l], v_new[l], half, h, r_thr, &mut x_new[l]));
+            }
+        }
+        for (l, ((((x, v), x_half), v_new), x_new)) in
+            xr.iter().zip(vr).zip(xhr).zip(vnr).zip(xnr).enumerate()
+        {
+            acc.push(l, one(*x, *v, *x_half, *v_new, half, h, r_thr, x_new));
+        }
+        acc.finish()
+    }
 }

@@ -420,26 +420,15 @@ impl SurfaceModel {
                 next_s: p.next_step_s,
             };
         }
-        // Guard: finite and no energy explosion.
-        let mut max_speed2 = 0.0f32;
-        let free = core.free();
-        let mut finite = true;
-        for f in 0..free {
-            let (vx, vy, vz) = (w.v_new[f], w.v_new[free + f], w.v_new[2 * free + f]);
-            let s2 = vx * vx + vy * vy + vz * vz;
-            finite &= s2.is_finite()
-                && w.x_new[f].is_finite()
-                && w.x_new[free + f].is_finite()
-                && w.x_new[2 * free + f].is_finite();
-            max_speed2 = max_speed2.max(s2);
-        }
-        if !finite {
+        // Guard: finite and no energy explosion (one vectorized pass over the candidate).
+        let guard = forces::guard_scan(&core.materials, &w.x_new, &w.v_new, &core.v);
+        if !guard.finite {
             return Attempt::NonFinite;
         }
-        let ke_new = forces::kinetic_energy(&core.materials, &w.v_new);
-        let ke_old = forces::kinetic_energy(&core.materials, &core.v);
-        let total_mass: f64 = core.materials.mass_kg.iter().map(|m| f64::from(*m)).sum();
-        let limit = 10.0 * ke_old + 0.5 * total_mass * GUARD_SPEED_M_PER_S * GUARD_SPEED_M_PER_S;
+        let max_speed2 = guard.max_speed2;
+        let (ke_new, ke_old) = (guard.kinetic_energy_new_j, guard.kinetic_energy_old_j);
+        let limit =
+            10.0 * ke_old + 0.5 * guard.total_mass_kg * GUARD_SPEED_M_PER_S * GUARD_SPEED_M_PER_S;
         if ke_new.is_nan() || ke_new > limit {
             return Attempt::NonFinite;
         }
