@@ -260,7 +260,7 @@ pub enum Resolved {
 
 /// Curvatures below this (1/m) are treated as straight (the bend moves points by less than a
 /// micrometre over a metre).
-const MIN_CURVATURE_PER_M: f32 = 1e-6;
+pub const MIN_CURVATURE_PER_M: f32 = 1e-6;
 
 impl Resolved {
     /// Forward map: rest-space point to deformed space.

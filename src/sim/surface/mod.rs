@@ -20,8 +20,9 @@
 #![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
 
 pub mod constraints;
-mod fastshape;
+mod fastmath;
 pub mod forces;
+mod kernels;
 mod resample;
 #[cfg(test)]
 mod tests;

@@ -1,0 +1,635 @@
+//! Inside/outside values and gradients of many points against one shape at once, for the
+//! constraint pass ([`super::constraints`]): structure-of-arrays batches, one simple loop per
+//! deformation and per primitive, fast branch-free math ([`super::fastmath`]), so the loops
+//! vectorise. The character model's shapes (`character::shape`) stay the reference: the
+//! formulas are theirs (same `F`, same zero set) and the tests below compare against them.
+
+#![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
+
+use glam::Vec3;
+
+use super::fastmath::{atan2, pow0, sin_cos};
+use crate::character::shape::{MIN_CURVATURE_PER_M, MIN_TAPER_SCALE};
+use crate::character::{Primitive, Resolved, ShapeGeometry};
+
+/// Points in one shape's frame (structure of arrays) with their values and gradients.
+#[derive(Debug, Clone, Default)]
+pub struct Batch {
+    /// Free-point index of each entry.
+    pub point: Vec<u32>,
+    /// Shape-space coordinates, metres.
+    pub p: [Vec<f32>; 3],
+    /// `F` at `p` (negative inside).
+    pub value: Vec<f32>,
+    /// `∇F` at `p`, shape space (not normalised).
+    pub grad: [Vec<f32>; 3],
+    /// Scratch: rest-space coordinates.
+    rest: [Vec<f32>; 3],
+    /// Scratch: `∂p_rest/∂p_shape`, row-major.
+    jac: [Vec<f32>; 9],
+    /// Scratch of the superellipsoid kernel.
+    tmp: [Vec<f32>; 5],
+}
+
+impl Batch {
+    /// Empties the batch.
+    pub fn clear(&mut self) {
+        self.point.clear();
+        for c in &mut self.p {
+            c.clear();
+        }
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.point.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.point.is_empty()
+    }
+
+    /// Appends a point.
+    #[inline]
+    pub fn push(&mut self, point: u32, p: Vec3) {
+        self.point.push(point);
+        self.p[0].push(p.x);
+        self.p[1].push(p.y);
+        self.p[2].push(p.z);
+    }
+
+    /// Entry `i`'s shape-space position.
+    #[inline]
+    pub fn position(&self, i: usize) -> Vec3 {
+        Vec3::new(self.p[0][i], self.p[1][i], self.p[2][i])
+    }
+
+    /// Entry `i`'s gradient.
+    #[inline]
+    pub fn gradient(&self, i: usize) -> Vec3 {
+        Vec3::new(self.grad[0][i], self.grad[1][i], self.grad[2][i])
+    }
+
+    /// Sets entry `i`'s position.
+    #[inline]
+    pub fn set_position(&mut self, i: usize, p: Vec3) {
+        self.p[0][i] = p.x;
+        self.p[1][i] = p.y;
+        self.p[2][i] = p.z;
+    }
+
+    /// Fills `value` (and `grad` when `want_gradient`) for every entry against `geometry`.
+    /// Without the gradient, `value` only has the sign of `F` (negative inside, zero on the
+    /// surface): it is the cheaper `F_raw − 1` without the normalisation, for the filter.
+    pub fn evaluate(&mut self, geometry: &ShapeGeometry, want_gradient: bool) {
+        let n = self.len();
+        self.value.resize(n, 0.0);
+        for c in 0..3 {
+            self.grad[c].resize(n, 0.0);
+        }
+        let deformed = !geometry.is_undeformed();
+        if deformed {
+            for c in 0..3 {
+                self.rest[c].clear();
+                self.rest[c].extend_from_slice(&self.p[c]);
+            }
+            if want_gradient {
+                for (k, j) in self.jac.iter_mut().enumerate() {
+                    j.clear();
+                    j.resize(n, if k % 4 == 0 { 1.0 } else { 0.0 });
+                }
+            }
+            let [x, y, z] = &mut self.rest;
+            for d in geometry.deformations().iter().rev() {
+                match (*d, want_gradient) {
+                    (Resolved::Taper { rate_per_m }, true) => {
+                        taper(rate_per_m, x, y, z, &mut self.jac)
+                    }
+                    (Resolved::Taper { rate_per_m }, false) => taper_points(rate_per_m, x, y, z),
+                    (Resolved::Twist { rate_rad_per_m }, true) => {
+                        twist(rate_rad_per_m, x, y, z, &mut self.jac)
+                    }
+                    (Resolved::Twist { rate_rad_per_m }, false) => {
+                        twist_points(rate_rad_per_m, x, y, z)
+                    }
+                    (Resolved::Bend { curvature_per_m }, grad) => {
+                        if curvature_per_m.abs() >= MIN_CURVATURE_PER_M {
+                            if grad {
+                                bend(curvature_per_m, x, y, z, &mut self.jac)
+                            } else {
+                                bend_points(curvature_per_m, x, y)
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let [x, y, z] = if deformed { &self.rest } else { &self.p };
+        let [gx, gy, gz] = &mut self.grad;
+        match geometry.primitive {
+            Primitive::Sphere { radius_m } => {
+                sphere(radius_m, x, y, z, &mut self.value, gx, gy, gz)
+            }
+            Primitive::Superellipsoid { radii_m, e1, e2 } => {
+                if want_gradient {
+                    superellipsoid(
+                        radii_m,
+                        e1,
+                        e2,
+                        x,
+                        y,
+                        z,
+                        &mut self.value,
+                        gx,
+                        gy,
+                        gz,
+                        &mut self.tmp,
+                    )
+                } else {
+                    superellipsoid_sign(radii_m, e1, e2, x, y, z, &mut self.value)
+                }
+            }
+            Primitive::Cylinder { .. } => {
+                for i in 0..n {
+                    let q = Vec3::new(x[i], y[i], z[i]);
+                    let (v, g) = geometry.primitive.value_and_gradient(q);
+                    self.value[i] = v;
+                    gx[i] = g.x;
+                    gy[i] = g.y;
+                    gz[i] = g.z;
+                }
+            }
+        }
+        if deformed && want_gradient {
+            gradient_to_shape(&self.jac, gx, gy, gz);
+        }
+    }
+}
+
+/// `jac ← J_d · jac` at entry `i` for the rows of `J_d` (row-major).
+#[inline(always)]
+fn accumulate(jac: &mut [Vec<f32>; 9], i: usize, rows: [[f32; 3]; 3]) {
+    let old = [
+        [jac[0][i], jac[1][i], jac[2][i]],
+        [jac[3][i], jac[4][i], jac[5][i]],
+        [jac[6][i], jac[7][i], jac[8][i]],
+    ];
+    for r in 0..3 {
+        for c in 0..3 {
+            jac[3 * r + c][i] =
+                rows[r][0] * old[0][c] + rows[r][1] * old[1][c] + rows[r][2] * old[2][c];
+        }
+    }
+}
+
+// The inverse deformations (deformed → rest) as `Resolved::invert`, in place, with (`taper`,
+// `twist`, `bend`) or without (`*_points`) their Jacobians.
+
+crate::sim::simd::multiversion! {
+    fn taper(rate: f32, x: &mut [f32], y: &[f32], z: &mut [f32], jac: &mut [Vec<f32>; 9]) {
+        let n = x.len().min(y.len()).min(z.len());
+        for i in 0..n {
+            let raw = 1.0 + rate * y[i];
+            let clamped = raw <= MIN_TAPER_SCALE;
+            let r = if clamped { MIN_TAPER_SCALE } else { raw };
+            let dr = if clamped { 0.0 } else { rate };
+            let inv = 1.0 / r;
+            let (qx, qz) = (x[i], z[i]);
+            x[i] = qx * inv;
+            z[i] = qz * inv;
+            let k = dr * inv * inv;
+            accumulate(jac, i, [[inv, -qx * k, 0.0], [0.0, 1.0, 0.0], [0.0, -qz * k, inv]]);
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    fn taper_points(rate: f32, x: &mut [f32], y: &[f32], z: &mut [f32]) {
+        let n = x.len().min(y.len()).min(z.len());
+        let (x, y, z) = (&mut x[..n], &y[..n], &mut z[..n]);
+        for i in 0..n {
+            let raw = 1.0 + rate * y[i];
+            let inv = 1.0 / if raw <= MIN_TAPER_SCALE { MIN_TAPER_SCALE } else { raw };
+            x[i] *= inv;
+            z[i] *= inv;
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    fn twist(w: f32, x: &mut [f32], y: &[f32], z: &mut [f32], jac: &mut [Vec<f32>; 9]) {
+        let n = x.len().min(y.len()).min(z.len());
+        for i in 0..n {
+            let (s, c) = sin_cos(w * y[i]);
+            let (qx, qz) = (x[i], z[i]);
+            let nx = qx * c + qz * s;
+            let nz = -qx * s + qz * c;
+            x[i] = nx;
+            z[i] = nz;
+            accumulate(jac, i, [[c, w * nz, s], [0.0, 1.0, 0.0], [-s, -w * nx, c]]);
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    fn twist_points(w: f32, x: &mut [f32], y: &[f32], z: &mut [f32]) {
+        let n = x.len().min(y.len()).min(z.len());
+        let (x, y, z) = (&mut x[..n], &y[..n], &mut z[..n]);
+        for i in 0..n {
+            let (s, c) = sin_cos(w * y[i]);
+            let (qx, qz) = (x[i], z[i]);
+            x[i] = qx * c + qz * s;
+            z[i] = -qx * s + qz * c;
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    fn bend(k: f32, x: &mut [f32], y: &mut [f32], z: &[f32], jac: &mut [Vec<f32>; 9]) {
+        let n = x.len().min(y.len()).min(z.len());
+        let inv_k = 1.0 / k;
+        for i in 0..n {
+            let (qx, qy) = (x[i], y[i]);
+            let ky = k * qy;
+            let omk = 1.0 - k * qx;
+            let theta = atan2(ky, omk);
+            let rho = (ky * ky + omk * omk).sqrt();
+            x[i] = -(k * qy * qy - 2.0 * qx + k * qx * qx) / (1.0 + rho);
+            y[i] = theta * inv_k;
+            let ok = rho > 1e-12;
+            let inv_rho = if ok { 1.0 / rho } else { 0.0 };
+            // sin θ and cos θ of θ = atan2(ky, 1 − kx) without trigonometry.
+            let s = if ok { ky * inv_rho } else { 0.0 };
+            let c = if ok { omk * inv_rho } else { 1.0 };
+            accumulate(jac, i, [[c, -s, 0.0], [s * inv_rho, c * inv_rho, 0.0], [0.0, 0.0, 1.0]]);
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    fn bend_points(k: f32, x: &mut [f32], y: &mut [f32]) {
+        let n = x.len().min(y.len());
+        let (x, y) = (&mut x[..n], &mut y[..n]);
+        let inv_k = 1.0 / k;
+        for i in 0..n {
+            let (qx, qy) = (x[i], y[i]);
+            let ky = k * qy;
+            let omk = 1.0 - k * qx;
+            let rho = (ky * ky + omk * omk).sqrt();
+            x[i] = -(k * qy * qy - 2.0 * qx + k * qx * qx) / (1.0 + rho);
+            y[i] = atan2(ky, omk) * inv_k;
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// `∇_shape F = Jᵀ ∇_rest F`.
+    fn gradient_to_shape(jac: &[Vec<f32>; 9], gx: &mut [f32], gy: &mut [f32], gz: &mut [f32]) {
+        let [j00, j01, j02, j10, j11, j12, j20, j21, j22] = jac;
+        let n = gx.len().min(gy.len()).min(gz.len()).min(j22.len());
+        for i in 0..n {
+            let (a, b, c) = (gx[i], gy[i], gz[i]);
+            gx[i] = j00[i] * a + j10[i] * b + j20[i] * c;
+            gy[i] = j01[i] * a + j11[i] * b + j21[i] * c;
+            gz[i] = j02[i] * a + j12[i] * b + j22[i] * c;
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    fn sphere(
+        radius_m: f32,
+        x: &[f32],
+        y: &[f32],
+        z: &[f32],
+        value: &mut [f32],
+        gx: &mut [f32],
+        gy: &mut [f32],
+        gz: &mut [f32],
+    ) {
+        let n = value.len().min(x.len()).min(y.len()).min(z.len());
+        let (gx, gy, gz) = (&mut gx[..n], &mut gy[..n], &mut gz[..n]);
+        for i in 0..n {
+            let len = (x[i] * x[i] + y[i] * y[i] + z[i] * z[i]).sqrt();
+            let ok = len > 0.0;
+            let inv = if ok { 1.0 / len } else { 0.0 };
+            value[i] = len - radius_m;
+            gx[i] = x[i] * inv;
+            gy[i] = if ok { y[i] * inv } else { 1.0 };
+            gz[i] = z[i] * inv;
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// The shape model's superellipsoid `F = s·f^(e1/2) − 1` on the point scaled into the unit
+    /// box (`character::shape`), and its gradient. One loop per term (each branch-free);
+    /// `tmp` is scratch.
+    fn superellipsoid(
+        radii: Vec3,
+        e1: f32,
+        e2: f32,
+        x: &[f32],
+        y: &[f32],
+        z: &[f32],
+        value: &mut [f32],
+        gx: &mut [f32],
+        gy: &mut [f32],
+        gz: &mut [f32],
+        tmp: &mut [Vec<f32>; 5],
+    ) {
+        let n = value.len().min(x.len()).min(y.len()).min(z.len());
+        let (x, y, z, value) = (&x[..n], &y[..n], &z[..n], &mut value[..n]);
+        let (gx, gy, gz) = (&mut gx[..n], &mut gy[..n], &mut gz[..n]);
+        for t in tmp.iter_mut() {
+            t.resize(n, 0.0);
+        }
+        let [scale, px, py, pz, a_pow] = tmp;
+        let (scale, px, py, pz, a_pow) =
+            (&mut scale[..n], &mut px[..n], &mut py[..n], &mut pz[..n], &mut a_pow[..n]);
+        let inv_r = Vec3::ONE / radii;
+        // The point scaled into the unit box: q = |p|/(radii·s), s = max component (gx,gy,gz
+        // hold q until the end).
+        for i in 0..n {
+            let (ux, uy, uz) = (x[i].abs() * inv_r.x, y[i].abs() * inv_r.y, z[i].abs() * inv_r.z);
+            let s = ux.max(uy).max(uz);
+            let inv_s = if s > 0.0 && s < f32::INFINITY { 1.0 / s } else { 0.0 };
+            scale[i] = s;
+            gx[i] = ux * inv_s;
+            gy[i] = uy * inv_s;
+            gz[i] = uz * inv_s;
+        }
+        if e1 == 1.0 && e2 == 1.0 {
+            for i in 0..n {
+                let (qx, qy, qz) = (gx[i], gy[i], gz[i]);
+                let root = (qx * qx + qy * qy + qz * qz).sqrt();
+                let valid = root > 0.0;
+                let inv = if valid { 1.0 / root } else { 0.0 };
+                value[i] = if valid { scale[i] * root - 1.0 } else { -1.0 };
+                gx[i] = (qx * inv * inv_r.x).copysign(x[i]);
+                gy[i] = if valid { (qy * inv * inv_r.y).copysign(y[i]) } else { 1.0 };
+                gz[i] = (qz * inv * inv_r.z).copysign(z[i]);
+            }
+            return;
+        }
+        let (exp_xz, exp_y, exp_a, exp_f) = (2.0 / e2, 2.0 / e1, e2 / e1, 0.5 * e1);
+        if e2 == 1.0 {
+            for i in 0..n {
+                px[i] = gx[i] * gx[i];
+                pz[i] = gz[i] * gz[i];
+            }
+        } else {
+            for i in 0..n {
+                px[i] = pow0(gx[i], exp_xz);
+                pz[i] = pow0(gz[i], exp_xz);
+            }
+        }
+        for i in 0..n {
+            py[i] = pow0(gy[i], exp_y);
+            a_pow[i] = pow0(px[i] + pz[i], exp_a);
+        }
+        for i in 0..n {
+            let (qx, qy, qz) = (gx[i], gy[i], gz[i]);
+            let big_a = px[i] + pz[i];
+            let f = a_pow[i] + py[i];
+            let f_pow = pow0(f, exp_f);
+            let valid = f > 0.0;
+            let f_term = if valid { f_pow / f } else { 0.0 };
+            let a_term = if big_a > 0.0 { a_pow[i] / big_a } else { 0.0 };
+            let dx = f_term * a_term * if qx > 0.0 { px[i] / qx } else { 0.0 };
+            let dy = f_term * if qy > 0.0 { py[i] / qy } else { 0.0 };
+            let dz = f_term * a_term * if qz > 0.0 { pz[i] / qz } else { 0.0 };
+            value[i] = if valid { scale[i] * f_pow - 1.0 } else { -1.0 };
+            gx[i] = (dx * inv_r.x).copysign(x[i]);
+            gy[i] = if valid { (dy * inv_r.y).copysign(y[i]) } else { 1.0 };
+            gz[i] = (dz * inv_r.z).copysign(z[i]);
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// `F_raw − 1` with `F_raw = (|x/a|^(2/e2) + |z/c|^(2/e2))^(e2/e1) + |y/b|^(2/e1)`: the
+    /// same sign as `F` (the model's `F + 1` is a positive power of `F_raw` for the points of a
+    /// batch, which lie in the shape's extent box so nothing overflows), fewer powers. One
+    /// loop per term so that every loop is branch-free.
+    fn superellipsoid_sign(
+        radii: Vec3,
+        e1: f32,
+        e2: f32,
+        x: &[f32],
+        y: &[f32],
+        z: &[f32],
+        value: &mut [f32],
+    ) {
+        let n = value.len().min(x.len()).min(y.len()).min(z.len());
+        let (x, y, z, value) = (&x[..n], &y[..n], &z[..n], &mut value[..n]);
+        let inv_r = Vec3::ONE / radii;
+        let (exp_xz, exp_y, exp_a) = (2.0 / e2, 2.0 / e1, e2 / e1);
+        // value ← A = |x/a|^(2/e2) + |z/c|^(2/e2)
+        if e2 == 1.0 {
+            for i in 0..n {
+                let (ux, uz) = (x[i] * inv_r.x, z[i] * inv_r.z);
+                value[i] = ux * ux + uz * uz;
+            }
+        } else {
+            for i in 0..n {
+                let (ux, uz) = (x[i].abs() * inv_r.x, z[i].abs() * inv_r.z);
+                value[i] = pow0(ux, exp_xz) + pow0(uz, exp_xz);
+            }
+        }
+        // value ← A^(e2/e1)
+        if e2 != e1 {
+            for v in value.iter_mut() {
+                *v = pow0(*v, exp_a);
+            }
+        }
+        // value ← value + |y/b|^(2/e1) − 1
+        if e1 == 1.0 {
+            for i in 0..n {
+                let uy = y[i] * inv_r.y;
+                value[i] += uy * uy - 1.0;
+            }
+        } else {
+            for i in 0..n {
+                value[i] += pow0(y[i].abs() * inv_r.y, exp_y) - 1.0;
+            }
+        }
+    }
+}
+
+/// A conservative half-extent box of the deformed shape in its own frame (every shape point
+/// `p` has `|p_i| ≤ extent_i`), metres.
+pub fn extent_m(geometry: &ShapeGeometry) -> Vec3 {
+    let mut e = match geometry.primitive {
+        Primitive::Sphere { radius_m } => Vec3::splat(radius_m),
+        Primitive::Superellipsoid { radii_m, .. } => radii_m,
+        Primitive::Cylinder {
+            radius_m,
+            half_length_m,
+        } => Vec3::new(radius_m, half_length_m, radius_m),
+    };
+    for d in geometry.deformations() {
+        e = match *d {
+            Resolved::Taper { rate_per_m } => {
+                let scale = (1.0 + rate_per_m.abs() * e.y).max(1.0);
+                Vec3::new(e.x * scale, e.y, e.z * scale)
+            }
+            Resolved::Twist { .. } => {
+                let rho = (e.x * e.x + e.z * e.z).sqrt();
+                Vec3::new(rho, e.y, rho)
+            }
+            Resolved::Bend { curvature_per_m } => {
+                if curvature_per_m.abs() < MIN_CURVATURE_PER_M {
+                    e
+                } else {
+                    // The bend maps the xy disc of radius r into that of radius √2·r
+                    // (`Resolved::bound`); z is unchanged.
+                    let r = (e.x * e.x + e.y * e.y).sqrt() * std::f32::consts::SQRT_2;
+                    Vec3::new(r, r, e.z)
+                }
+            }
+        };
+    }
+    e
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_noise::Noise;
+
+    fn geometries() -> Vec<ShapeGeometry> {
+        let prims = [
+            Primitive::Sphere { radius_m: 0.07 },
+            Primitive::Cylinder {
+                radius_m: 0.03,
+                half_length_m: 0.12,
+            },
+            Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.08, 0.15, 0.1),
+                e1: 0.6,
+                e2: 1.4,
+            },
+            Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.1, 0.2, 0.12),
+                e1: 1.0,
+                e2: 1.0,
+            },
+            Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.05, 0.3, 0.05),
+                e1: 0.3,
+                e2: 1.0,
+            },
+            Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.12, 0.1, 0.09),
+                e1: 1.8,
+                e2: 0.4,
+            },
+        ];
+        let chains = [
+            vec![],
+            vec![Resolved::Taper { rate_per_m: 1.5 }],
+            vec![Resolved::Taper { rate_per_m: -4.0 }],
+            vec![Resolved::Twist {
+                rate_rad_per_m: 3.0,
+            }],
+            vec![Resolved::Bend {
+                curvature_per_m: -2.0,
+            }],
+            vec![
+                Resolved::Twist {
+                    rate_rad_per_m: 3.0,
+                },
+                Resolved::Bend {
+                    curvature_per_m: 2.0,
+                },
+                Resolved::Taper { rate_per_m: 0.8 },
+            ],
+        ];
+        let mut out = Vec::new();
+        for p in prims {
+            for c in &chains {
+                out.push(ShapeGeometry::new(p, c));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn batches_match_the_character_models_shapes() {
+        let mut noise = Noise(17);
+        let mut batch = Batch::default();
+        for g in geometries() {
+            batch.clear();
+            for k in 0..600u32 {
+                batch.push(k, noise.vec() * 0.3);
+            }
+            batch.evaluate(&g, true);
+            let values = batch.value.clone();
+            batch.evaluate(&g, false);
+            for i in 0..batch.len() {
+                let (v_ref, _) = g.value_and_gradient(batch.position(i));
+                if v_ref.abs() > 1e-4 {
+                    assert_eq!(
+                        batch.value[i] < 0.0,
+                        v_ref < 0.0,
+                        "{g:?}: sign-only value disagrees"
+                    );
+                }
+            }
+            batch.value = values;
+            batch.evaluate(&g, true);
+            for i in 0..batch.len() {
+                let p = batch.position(i);
+                let (v_ref, g_ref) = g.value_and_gradient(p);
+                let v = batch.value[i];
+                assert!(
+                    (v - v_ref).abs() <= 2e-5 * v_ref.abs().max(1.0),
+                    "{g:?} at {p}: {v} vs {v_ref}"
+                );
+                if v_ref.abs() > 1e-4 {
+                    assert_eq!(
+                        v < 0.0,
+                        v_ref < 0.0,
+                        "{g:?} at {p}: inside/outside disagree"
+                    );
+                }
+                let grad = batch.gradient(i);
+                assert!(
+                    (grad - g_ref).length() <= 2e-3 * g_ref.length().max(1.0),
+                    "{g:?} at {p}: {grad} vs {g_ref}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_extent_box_contains_every_shape() {
+        let mut noise = Noise(23);
+        for g in geometries() {
+            let e = extent_m(&g);
+            // Surface points from rest-space radial projections, deformed.
+            let mut largest = Vec3::ZERO;
+            for _ in 0..4000 {
+                let dir = noise.vec();
+                if dir.length() < 1e-3 {
+                    continue;
+                }
+                let p = g.deform(g.primitive.radial_projection(dir));
+                assert!(
+                    p.x.abs() <= e.x * 1.0001
+                        && p.y.abs() <= e.y * 1.0001
+                        && p.z.abs() <= e.z * 1.0001,
+                    "{g:?}: {p} outside {e}"
+                );
+                largest = largest.max(p.abs());
+            }
+            // And it is not absurdly loose.
+            assert!(
+                largest.max_element() >= 0.33 * e.max_element(),
+                "{g:?}: {largest} vs {e}"
+            );
+        }
+    }
+}
