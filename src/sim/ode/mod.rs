@@ -590,46 +590,31 @@ crate::sim::simd::multiversion! {
         v_mid: &mut [f32],
     ) -> f32 {
         use crate::sim::simd::{LANES, MaxLanes};
-        let n = v.len();
-        let (a_pos, inv_v_scale) = (&a_pos[..n], &inv_v_scale[..n]);
-        let (a, v_new, v_mid) = (&mut a[..n], &mut v_new[..n], &mut v_mid[..n]);
-        let mut acc = MaxLanes::new();
-        let full = n - n % LANES;
         #[inline(always)]
-        #[allow(clippy::too_many_arguments)]
-        fn one(
-            vi: f32,
-            api: f32,
-            si: f32,
-            h: f32,
-            ai: &mut f32,
-            vni: &mut f32,
-            vmi: &mut f32,
-        ) -> f32 {
-            let nv = vi + h * *ai;
-            let d = (nv - *vni).abs() * si;
-            *vni = nv;
-            *vmi = 0.5 * (nv + vi);
-            *ai = api;
+        fn one(v: f32, a_pos: f32, scale: f32, h: f32, a: &mut f32, v_new: &mut f32, v_mid: &mut f32) -> f32 {
+            let nv = v + h * *a;
+            let d = (nv - *v_new).abs() * scale;
+            *v_new = nv;
+            *v_mid = 0.5 * (nv + v);
+            *a = a_pos;
             d
         }
-        for (c, ((((vc, apc), sc), (ac, vnc)), vmc)) in v[..full]
-            .chunks_exact(LANES)
-            .zip(a_pos[..full].chunks_exact(LANES))
-            .zip(inv_v_scale[..full].chunks_exact(LANES))
-            .zip(a[..full].chunks_exact_mut(LANES).zip(v_new[..full].chunks_exact_mut(LANES)))
-            .zip(v_mid[..full].chunks_exact_mut(LANES))
-            .enumerate()
-        {
-            let _ = c;
+        let mut acc = MaxLanes::new();
+        let (vc, vr) = v.as_chunks::<LANES>();
+        let (pc, pr) = a_pos.as_chunks::<LANES>();
+        let (sc, sr) = inv_v_scale.as_chunks::<LANES>();
+        let (ac, ar) = a.as_chunks_mut::<LANES>();
+        let (nc, nr) = v_new.as_chunks_mut::<LANES>();
+        let (mc, mr) = v_mid.as_chunks_mut::<LANES>();
+        for (((((v, p), s), a), vn), vm) in vc.iter().zip(pc).zip(sc).zip(ac).zip(nc).zip(mc) {
             for l in 0..LANES {
-                let d = one(vc[l], apc[l], sc[l], h, &mut ac[l], &mut vnc[l], &mut vmc[l]);
-                acc.push(l, d);
+                acc.push(l, one(v[l], p[l], s[l], h, &mut a[l], &mut vn[l], &mut vm[l]));
             }
         }
-        for i in full..n {
-            let d = one(v[i], a_pos[i], inv_v_scale[i], h, &mut a[i], &mut v_new[i], &mut v_mid[i]);
-            acc.push(i, d);
+        for (l, (((((v, p), s), a), vn), vm)) in
+            vr.iter().zip(pr).zip(sr).zip(ar).zip(nr).zip(mr).enumerate()
+        {
+            acc.push(l, one(*v, *p, *s, h, a, vn, vm));
         }
         acc.finish()
     }

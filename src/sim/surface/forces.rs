@@ -123,7 +123,8 @@ pub struct ForceScratch {
     spring_pos: Vec<f32>,
     /// Per spring: anchor velocity over the current step.
     anchor_vel: [Vec<f32>; 3],
-    /// Per spring: 1/mass of its point.
+    /// Per spring: 1/mass of its point (filled only when the springs are not one contiguous
+    /// run of points; a run reads the materials' slice).
     spring_inv_mass: Vec<f32>,
     /// Per spring: its point's position or velocity (gathered for the vector pass).
     spring_point: [Vec<f32>; 3],
@@ -193,31 +194,82 @@ pub fn assemble_grid(
 pub fn grid_normals(around: usize, along: usize, grid: &[Vec<f32>; 3], out: &mut [Vec<f32>; 3]) {
     let m = around;
     resize3(out, m * along);
-    let [gx, gy, gz] = grid;
-    for j in 0..along {
-        let jp = if j + 1 < along { j + 1 } else { j };
-        let jm = j.saturating_sub(1);
-        for i in 0..m {
-            let ip = if i + 1 == m { 0 } else { i + 1 };
-            let im = if i == 0 { m - 1 } else { i - 1 };
-            let (a, b) = (j * m + ip, j * m + im);
-            let (c, d) = (jp * m + i, jm * m + i);
-            let d1 = [gx[a] - gx[b], gy[a] - gy[b], gz[a] - gz[b]];
-            let d2 = [gx[c] - gx[d], gy[c] - gy[d], gz[c] - gz[d]];
-            let nx = d2[1] * d1[2] - d2[2] * d1[1];
-            let ny = d2[2] * d1[0] - d2[0] * d1[2];
-            let nz = d2[0] * d1[1] - d2[1] * d1[0];
-            let len2 = nx * nx + ny * ny + nz * nz;
-            let k = j * m + i;
-            if len2 > 1e-24 && len2.is_finite() {
-                let inv = 1.0 / len2.sqrt();
-                out[0][k] = nx * inv;
-                out[1][k] = ny * inv;
-                out[2][k] = nz * inv;
-            } else {
-                out[0][k] = 0.0;
-                out[1][k] = 1.0;
-                out[2][k] = 0.0;
+    if m < 2 || along < 2 || grid.iter().any(|g| g.len() != m * along) {
+        return; // not a grid of this size (a programming error; callers never do so)
+    }
+    normals_pass(m, along, grid, out);
+}
+
+/// The normal at node `(i, j)` from the grid, by the definition (wrap around, one-sided ends).
+#[inline(always)]
+fn normal_node(m: usize, along: usize, g: &[Vec<f32>; 3], i: usize, j: usize) -> [f32; 3] {
+    let jp = if j + 1 < along { j + 1 } else { j };
+    let jm = j.saturating_sub(1);
+    let ip = if i + 1 == m { 0 } else { i + 1 };
+    let im = if i == 0 { m - 1 } else { i - 1 };
+    let (a, b) = (j * m + ip, j * m + im);
+    let (c, d) = (jp * m + i, jm * m + i);
+    unit_normal(
+        [g[0][a] - g[0][b], g[1][a] - g[1][b], g[2][a] - g[2][b]],
+        [g[0][c] - g[0][d], g[1][c] - g[1][d], g[2][c] - g[2][d]],
+    )
+}
+
+/// `normalize(d2 × d1)`, or +Y when that is degenerate (tiny or not finite).
+#[inline(always)]
+fn unit_normal(d1: [f32; 3], d2: [f32; 3]) -> [f32; 3] {
+    let nx = d2[1] * d1[2] - d2[2] * d1[1];
+    let ny = d2[2] * d1[0] - d2[0] * d1[2];
+    let nz = d2[0] * d1[1] - d2[1] * d1[0];
+    let len2 = nx * nx + ny * ny + nz * nz;
+    // `len2 ≤ f32::MAX` is false for +∞ and NaN.
+    let ok = len2 > 1e-24 && len2 <= f32::MAX;
+    let inv = 1.0 / len2.sqrt();
+    if ok {
+        [nx * inv, ny * inv, nz * inv]
+    } else {
+        [0.0, 1.0, 0.0]
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// [`grid_normals`]' work: the interior rows as one flat vector loop (a row's first and
+    /// last nodes first take the neighbouring rows' nodes around), then the wrapped columns
+    /// and the two end rows by the definition.
+    fn normals_pass(m: usize, along: usize, grid: &[Vec<f32>; 3], out: &mut [Vec<f32>; 3]) {
+        if along >= 3 {
+            let len = m * (along - 2);
+            #[inline(always)]
+            fn sl(v: &[Vec<f32>; 3], o: usize, len: usize) -> [&[f32]; 3] {
+                [&v[0][o..o + len], &v[1][o..o + len], &v[2][o..o + len]]
+            }
+            let (ip, im) = (sl(grid, m + 1, len), sl(grid, m - 1, len));
+            let (jp, jm) = (sl(grid, 2 * m, len), sl(grid, 0, len));
+            let [ox, oy, oz] = out;
+            let (ox, oy, oz) = (&mut ox[m..m + len], &mut oy[m..m + len], &mut oz[m..m + len]);
+            for k in 0..len {
+                let n = unit_normal(
+                    [ip[0][k] - im[0][k], ip[1][k] - im[1][k], ip[2][k] - im[2][k]],
+                    [jp[0][k] - jm[0][k], jp[1][k] - jm[1][k], jp[2][k] - jm[2][k]],
+                );
+                ox[k] = n[0];
+                oy[k] = n[1];
+                oz[k] = n[2];
+            }
+        }
+        let mut put = |i: usize, j: usize| {
+            let n = normal_node(m, along, grid, i, j);
+            for c in 0..3 {
+                out[c][j * m + i] = n[c];
+            }
+        };
+        for j in 1..along.saturating_sub(1) {
+            put(0, j);
+            put(m - 1, j);
+        }
+        for j in [0, along - 1] {
+            for i in 0..m {
+                put(i, j);
             }
         }
     }
@@ -532,11 +584,11 @@ fn tissue_position(
         0.0
     };
     let inv_mass = &input.materials.inv_mass;
-    for (im, p) in scratch.spring_inv_mass.iter_mut().zip(&s.point) {
-        *im = inv_mass[*p as usize];
-    }
     let run = contiguous_run(&s.point, free);
     if run.is_none() {
+        for (im, p) in scratch.spring_inv_mass.iter_mut().zip(&s.point) {
+            *im = inv_mass[*p as usize];
+        }
         resize3(&mut scratch.spring_point, ns);
         resize3(&mut scratch.spring_accel, ns);
         gather_points(&s.point, x, free, &mut scratch.spring_point);
@@ -555,6 +607,10 @@ fn tissue_position(
     } = scratch;
     let points: [&[f32]; 3];
     let accel: [&mut [f32]; 3];
+    let spring_inv_mass: &[f32] = match run {
+        Some(o) => &inv_mass[o..o + ns],
+        None => spring_inv_mass,
+    };
     match run {
         Some(o) => {
             points = block_slices(x, free, o, ns);
@@ -698,7 +754,7 @@ pub fn add_velocity_accel(
                 &sc.spring_dir,
                 &sc.spring_pos,
                 &s.kd,
-                &sc.spring_inv_mass,
+                &mat.inv_mass[o..o + ns],
                 [&mut ax[o..o + ns], &mut ay[o..o + ns], &mut az[o..o + ns]],
             );
         }
@@ -1180,6 +1236,42 @@ mod kernel_tests {
             // Scattered, repeated points (the gather/scatter path).
             let scattered: Vec<u32> = (0..2 * free).map(|q| (q * 7 + 3) % free).collect();
             check(&case(m, n, true, scattered, 13));
+        }
+    }
+
+    #[test]
+    fn grid_normals_match_the_definition_everywhere() {
+        for (m, n) in [(3usize, 2usize), (5, 3), (32, 32), (13, 7)] {
+            let c = case(m, n.max(3), false, Vec::new(), 17);
+            let mut grid: [Vec<f32>; 3] = Default::default();
+            let k = &c.kin;
+            assemble_grid(
+                m,
+                n.max(3),
+                &c.x,
+                &k.rings_start,
+                &k.rings_end,
+                0.3,
+                &mut grid,
+            );
+            let n = n.max(3);
+            // A collapsed neighbourhood (degenerate normal) and a NaN.
+            for c in 0..3 {
+                grid[c][m + 1] = grid[c][m];
+                grid[c][m + 2] = grid[c][m];
+                grid[c][2 * m] = grid[c][m];
+            }
+            grid[1][n * m - 1] = f32::NAN;
+            let mut out: [Vec<f32>; 3] = Default::default();
+            grid_normals(m, n, &grid, &mut out);
+            for j in 0..n {
+                for i in 0..m {
+                    let want = normal_node(m, n, &grid, i, j);
+                    let got = [out[0][j * m + i], out[1][j * m + i], out[2][j * m + i]];
+                    assert_eq!(got, want, "{m}x{n} node ({i}, {j})");
+                    assert!(got.iter().all(|v| v.is_finite()));
+                }
+            }
         }
     }
 
