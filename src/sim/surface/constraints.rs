@@ -79,6 +79,8 @@ struct PassScratch {
     moved: Vec<u32>,
     /// Stage-one results along one run (1: a hit), padded to whole words of 8.
     hit: Vec<u8>,
+    /// The hits' positions in the run.
+    hit_index: Vec<u32>,
     batch: Batch,
     project: Batch,
     /// Number of gated points before each index (rounds and re-checks).
@@ -482,9 +484,10 @@ fn sphere_stage(
             &mut sc.hit[..len],
         );
         sc.hit[len..].fill(0);
-        let mask = std::mem::take(&mut sc.hit);
-        for i in hits(&mask) {
-            let f = a + i;
+        collect_hits(&sc.hit, &mut sc.hit_index);
+        let found = std::mem::take(&mut sc.hit_index);
+        for &i in &found {
+            let f = a + i as usize;
             let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
             let d = q - c;
             let dist = d.length();
@@ -503,7 +506,7 @@ fn sphere_stage(
             record_move(sc, f, delta, dir, s_idx, round);
             moved += 1;
         }
-        sc.hit = mask;
+        sc.hit_index = found;
     }
     moved
 }
@@ -534,8 +537,9 @@ fn general_stage(
             &mut sc.hit[..len],
         );
         sc.hit[len..].fill(0);
-        for i in hits(&sc.hit) {
-            let f = a + i;
+        collect_hits(&sc.hit, &mut sc.hit_index);
+        for &i in &sc.hit_index {
+            let f = a + i as usize;
             let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
             sc.batch.push(f as u32, t.transform_point3(q));
         }
@@ -605,23 +609,20 @@ fn general_stage(
     moved
 }
 
-/// Indices of the non-zero bytes of `mask` (whose length is a multiple of 8), skipping
-/// zero words of eight at a time.
-fn hits(mask: &[u8]) -> impl Iterator<Item = usize> + '_ {
-    mask.chunks_exact(8).enumerate().flat_map(|(w, chunk)| {
-        let word = u64::from_le_bytes([
+/// Appends the indices of the non-zero bytes of `mask` (whose length is a multiple of 8) to
+/// `out`, skipping zero words of eight at a time.
+fn collect_hits(mask: &[u8], out: &mut Vec<u32>) {
+    out.clear();
+    for (w, chunk) in mask.chunks_exact(8).enumerate() {
+        let mut bits = u64::from_le_bytes([
             chunk[0], chunk[1], chunk[2], chunk[3], chunk[4], chunk[5], chunk[6], chunk[7],
         ]);
-        let mut bits = word;
-        std::iter::from_fn(move || {
-            if bits == 0 {
-                return None;
-            }
-            let byte = (bits.trailing_zeros() / 8) as usize;
+        while bits != 0 {
+            let byte = bits.trailing_zeros() / 8;
             bits &= !(0xffu64 << (8 * byte));
-            Some(8 * w + byte)
-        })
-    })
+            out.push(8 * w as u32 + byte);
+        }
+    }
 }
 
 crate::sim::simd::multiversion! {
