@@ -28,9 +28,10 @@
 //!
 //! Rules for bodies: arguments are plain `name: Type` (no patterns, no generics); write the body
 //! so LLVM can vectorize it (zipped slices or slices re-sliced to one length, no bounds checks,
-//! no loop-carried scalar reductions: use [`MaxLanes`] / `[f32; LANES]` accumulators). Do not
-//! call `f32::mul_add` in a body: without FMA the baseline copy turns it into a slow libm call;
-//! plain `a * b + c` is exact IEEE in both copies (Rust never contracts it).
+//! no loop-carried scalar reductions: use [`MaxLanes`] / `[f32; LANES]` accumulators; helpers
+//! as `#[inline(always)]` fns, not closures, which may stay out of line without the AVX2
+//! features). Do not call `f32::mul_add` in a body: without FMA the baseline copy turns it into
+//! a slow libm call; plain `a * b + c` is exact IEEE in both copies (Rust never contracts it).
 //!
 //! # Reductions ([`MaxLanes`])
 //! `m = m.max(d)` over a slice is a loop-carried dependency LLVM will not reorder, so it runs

@@ -257,19 +257,21 @@ crate::sim::simd::multiversion! {
                 oz[k] = n[2];
             }
         }
-        let mut put = |i: usize, j: usize| {
-            let n = normal_node(m, along, grid, i, j);
-            for c in 0..3 {
-                out[c][j * m + i] = n[c];
-            }
-        };
+        // (No closure here: it would not be inlined into the AVX2 copy.)
         for j in 1..along.saturating_sub(1) {
-            put(0, j);
-            put(m - 1, j);
+            for i in [0, m - 1] {
+                let n = normal_node(m, along, grid, i, j);
+                out[0][j * m + i] = n[0];
+                out[1][j * m + i] = n[1];
+                out[2][j * m + i] = n[2];
+            }
         }
         for j in [0, along - 1] {
             for i in 0..m {
-                put(i, j);
+                let n = normal_node(m, along, grid, i, j);
+                out[0][j * m + i] = n[0];
+                out[1][j * m + i] = n[1];
+                out[2][j * m + i] = n[2];
             }
         }
     }
