@@ -472,19 +472,7 @@ fn sphere_stage(
     let mut moved = 0;
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
-        let len = b - a;
-        sc.hit.resize(len.next_multiple_of(8), 0);
-        sphere_filter(
-            c,
-            r2,
-            &sc.q[0][a..b],
-            &sc.q[1][a..b],
-            &sc.q[2][a..b],
-            &sc.gate[a..b],
-            &mut sc.hit[..len],
-        );
-        sc.hit[len..].fill(0);
-        collect_hits(&sc.hit, &mut sc.hit_index);
+        filter_run(sc, a, b, Filter::Sphere { center: c, r2 });
         let found = std::mem::take(&mut sc.hit_index);
         for &i in &found {
             let f = a + i as usize;
@@ -525,19 +513,15 @@ fn general_stage(
     sc.batch.clear();
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
-        let len = b - a;
-        sc.hit.resize(len.next_multiple_of(8), 0);
-        box_filter(
-            t,
-            extent,
-            &sc.q[0][a..b],
-            &sc.q[1][a..b],
-            &sc.q[2][a..b],
-            &sc.gate[a..b],
-            &mut sc.hit[..len],
+        filter_run(
+            sc,
+            a,
+            b,
+            Filter::Box {
+                shape_from_world: t,
+                extent,
+            },
         );
-        sc.hit[len..].fill(0);
-        collect_hits(&sc.hit, &mut sc.hit_index);
         for &i in &sc.hit_index {
             let f = a + i as usize;
             let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
@@ -607,6 +591,40 @@ fn general_stage(
         moved += 1;
     }
     moved
+}
+
+/// The first stage's test of one shape.
+enum Filter<'a> {
+    /// Strictly inside an undeformed sphere (`|q − center|² < r2`).
+    Sphere { center: Vec3, r2: f32 },
+    /// Inside a shape's extent box in its own frame.
+    Box {
+        shape_from_world: &'a Affine3A,
+        extent: Vec3,
+    },
+}
+
+/// Runs `filter` over the gated fat points of the run `[a, b)` and leaves the positions (in
+/// the run) of those that pass in `sc.hit_index`.
+fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>) {
+    let len = b - a;
+    sc.hit.resize(len.next_multiple_of(8), 0);
+    let (qx, qy, qz, gate) = (
+        &sc.q[0][a..b],
+        &sc.q[1][a..b],
+        &sc.q[2][a..b],
+        &sc.gate[a..b],
+    );
+    let hit = &mut sc.hit[..len];
+    match filter {
+        Filter::Sphere { center, r2 } => sphere_filter(center, r2, qx, qy, qz, gate, hit),
+        Filter::Box {
+            shape_from_world,
+            extent,
+        } => box_filter(shape_from_world, extent, qx, qy, qz, gate, hit),
+    }
+    sc.hit[len..].fill(0);
+    collect_hits(&sc.hit, &mut sc.hit_index);
 }
 
 /// Appends the indices of the non-zero bytes of `mask` (whose length is a multiple of 8) to
