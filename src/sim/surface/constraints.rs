@@ -99,11 +99,6 @@ impl Broadphase {
     pub fn invalidate(&mut self) {
         self.valid = false;
     }
-
-    /// Number of (point, shape) candidate pairs in the current runs (for tests and reports).
-    pub fn candidate_pairs(&self) -> usize {
-        self.runs.iter().map(|(a, b)| (b - a) as usize).sum()
-    }
 }
 
 /// What a constraint pass found.

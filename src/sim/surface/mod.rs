@@ -1133,11 +1133,10 @@ fn constrain_candidate(
         &mut w.touched,
     );
     let mut passes = 0;
-    let last_corrected = outcome.corrected;
     // Corrections below this do not warrant another pass.
     let negligible_m = 0.1 * core.epsilon_c_m;
     let mut last_corrected = if outcome.max_correction_m > negligible_m {
-        last_corrected
+        outcome.corrected
     } else {
         0
     };
