@@ -99,6 +99,15 @@ impl Broadphase {
     pub fn invalidate(&mut self) {
         self.valid = false;
     }
+
+    /// The free points the last [`enforce`] call moved, each with the world unit direction
+    /// the last shape pushed it in (the muscle's outward normal there).
+    pub fn last_moves(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
+        let sc = &self.scratch;
+        sc.moved
+            .iter()
+            .map(|&f| (f as usize, sc.last_normal[f as usize]))
+    }
 }
 
 /// What a constraint pass found.
