@@ -46,6 +46,26 @@ pub trait SecondOrderSystem {
     fn has_velocity_forces(&self) -> bool {
         true
     }
+
+    /// Whether [`absorbed_error`](Self::absorbed_error) may change anything. When not (the
+    /// default), the adaptive methods take the full embedded error estimate in one fused pass.
+    fn has_absorbed_error(&self) -> bool {
+        false
+    }
+
+    /// Removes from a step's position error the part the system's own constraints absorb.
+    ///
+    /// `error` holds, per degree of freedom and unscaled, the embedded Euler position minus the
+    /// proposed one (`(x + h v) − x_new`, LEMAN eq. 9); `x` is the state at the step's start.
+    /// A model that projects points out of obstacles after each step (LEMAN 4.2.3) may drop
+    /// the component of a contact point's error that points into the obstacle: the constraint
+    /// replaces that part of the motion and controls it with its own tolerance ε_c, so it
+    /// should not limit the step. The step control then takes the scaled ∞-norm (eq. 8, 11)
+    /// of what is left. Only called when [`has_absorbed_error`](Self::has_absorbed_error)
+    /// says so; the default leaves the error as it is.
+    fn absorbed_error(&self, x: &[f32], error: &mut [f32]) {
+        let _ = (x, error);
+    }
 }
 
 /// Which integration method to use. Switchable between steps.
@@ -360,7 +380,16 @@ impl Integrator {
         }
         // (7h) r_{t+h} = r_{t+h/2} + h/2 v_{t+h}; (9, 11) Δ = ‖(r_t + h v_t − r_{t+h}) r_scale‖∞
         let r_thr = tol.position_threshold_m as f32;
-        let delta = verlet_finish(x, v, x_half, v_new, half, h, r_thr, x_new);
+        let delta = if sys.has_absorbed_error() {
+            // The same with the error vector kept, so the system can drop what its
+            // constraints absorb before the norm is taken (reuses the velocity scales).
+            let error = inv_v_scale;
+            verlet_finish_error(x, v, x_half, v_new, half, h, x_new, error);
+            sys.absorbed_error(x, error);
+            scaled_max_abs(x, error, r_thr)
+        } else {
+            verlet_finish(x, v, x_half, v_new, half, h, r_thr, x_new)
+        };
         let mut ratio = f64::from(delta) / tol.position_tolerance;
         if !delta.is_finite() {
             ratio = f64::INFINITY;
@@ -392,7 +421,7 @@ impl Integrator {
     ) -> Proposal {
         let tol = self.tolerances;
         let h = h64 as f32;
-        let [a1, a2, x1, v1, _, _] = &mut self.scratch;
+        let [a1, a2, x1, v1, error, _] = &mut self.scratch;
         sys.position_accel(t_s, x, a1);
         sys.add_velocity_accel(t_s, x, v, a1);
         for i in 0..x.len() {
@@ -403,18 +432,31 @@ impl Integrator {
         sys.add_velocity_accel(t_s + h64, x1, v1, a2);
         let r_thr = tol.position_threshold_m as f32;
         let v_thr = tol.velocity_threshold_m_per_s as f32;
+        // With constraints that absorb part of the position error, that error is kept as a
+        // vector (Euler minus Heun) for the system to trim before its norm is taken; the
+        // velocity error is used as it is either way.
+        let keep = sys.has_absorbed_error();
         let mut err = 0.0f32;
         for i in 0..x.len() {
             // Heun: x₂ = x + h/2 (v + v₁), v₂ = v + h/2 (a₁ + a₂); Euler: (x₁, v₁).
             let xn = x[i] + 0.5 * h * (v[i] + v1[i]);
             let vn = v[i] + 0.5 * h * (a1[i] + a2[i]);
-            let ex = (xn - x1[i]).abs() / x[i].abs().max(r_thr);
             // Velocity error is scaled to a position-like quantity by multiplying with h so one
             // tolerance governs both (both are O(h²)).
             let ev = h * (vn - v1[i]).abs() / v[i].abs().max(v_thr);
-            err = err.max(ex).max(ev);
+            if keep {
+                error[i] = x1[i] - xn;
+                err = err.max(ev);
+            } else {
+                let ex = (xn - x1[i]).abs() / x[i].abs().max(r_thr);
+                err = err.max(ex).max(ev);
+            }
             x_new[i] = xn;
             v_new[i] = vn;
+        }
+        if keep {
+            sys.absorbed_error(x, error);
+            err = err.max(scaled_max_abs(x, error, r_thr));
         }
         let ratio = if err.is_finite() {
             f64::from(err) / tol.position_tolerance
@@ -658,6 +700,58 @@ crate::sim::simd::multiversion! {
             xr.iter().zip(vr).zip(xhr).zip(vnr).zip(xnr).enumerate()
         {
             acc.push(l, one(*x, *v, *x_half, *v_new, half, h, r_thr, x_new));
+        }
+        acc.finish()
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// [`verlet_finish`] keeping the error vector: `x_new = x_half + h/2 v_new` and
+    /// `error = x + h v − x_new` (unscaled), for a system that trims the error
+    /// ([`SecondOrderSystem::absorbed_error`]) before [`scaled_max_abs`] takes its norm.
+    #[allow(clippy::too_many_arguments)]
+    fn verlet_finish_error(
+        x: &[f32],
+        v: &[f32],
+        x_half: &[f32],
+        v_new: &[f32],
+        half: f32,
+        h: f32,
+        x_new: &mut [f32],
+        error: &mut [f32],
+    ) {
+        for (((x, v), (x_half, v_new)), (x_new, error)) in x
+            .iter()
+            .zip(v)
+            .zip(x_half.iter().zip(v_new))
+            .zip(x_new.iter_mut().zip(error.iter_mut()))
+        {
+            let xn = x_half + half * v_new;
+            *x_new = xn;
+            *error = (x + h * v) - xn;
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// The scaled ∞-norm of eq. 8 and 11: `max |error| / max(|x|, r_thr)` (NaN or ∞ when any
+    /// term is).
+    fn scaled_max_abs(x: &[f32], error: &[f32], r_thr: f32) -> f32 {
+        use crate::sim::simd::{LANES, MaxLanes};
+        #[inline(always)]
+        fn one(x: f32, e: f32, r_thr: f32) -> f32 {
+            e.abs() / x.abs().max(r_thr)
+        }
+        let mut acc = MaxLanes::new();
+        let (xc, xr) = x.as_chunks::<LANES>();
+        let (ec, er) = error.as_chunks::<LANES>();
+        for (x, e) in xc.iter().zip(ec) {
+            for l in 0..LANES {
+                acc.push(l, one(x[l], e[l], r_thr));
+            }
+        }
+        for (l, (x, e)) in xr.iter().zip(er).enumerate() {
+            acc.push(l, one(*x, *e, r_thr));
         }
         acc.finish()
     }

@@ -240,3 +240,179 @@ fn names_round_trip() {
     }
     assert_eq!(IntegratorKind::from_name("leapfrog"), None);
 }
+
+/// A point `(x, y)` (state `[x, y]`) under a constant acceleration `(ax, ay)`, with a floor at
+/// `y = 0` that the harness ([`run_on_floor`]) enforces after each accepted step, as a model's
+/// constraint pass would. When `contact_aware`, the error hook drops the inward (−y) part of
+/// the error while the point touched the floor after the last accepted step.
+struct OnFloor {
+    accel: [f32; 2],
+    contact_aware: bool,
+    in_contact: bool,
+}
+
+impl OnFloor {
+    fn new(accel: [f32; 2], contact_aware: bool) -> Self {
+        Self {
+            accel,
+            contact_aware,
+            in_contact: false,
+        }
+    }
+}
+
+impl SecondOrderSystem for OnFloor {
+    fn dofs(&self) -> usize {
+        2
+    }
+    fn position_accel(&mut self, _t: f64, _x: &[f32], a: &mut [f32]) {
+        a.copy_from_slice(&self.accel);
+    }
+    fn add_velocity_accel(&mut self, _t: f64, _x: &[f32], _v: &[f32], _a: &mut [f32]) {}
+    fn has_velocity_forces(&self) -> bool {
+        false
+    }
+    fn has_absorbed_error(&self) -> bool {
+        self.contact_aware && self.in_contact
+    }
+    fn absorbed_error(&self, _x: &[f32], error: &mut [f32]) {
+        // Outward normal (0, 1): e·n > 0 means the step went further into the floor than
+        // Euler's; the floor constraint replaces that part.
+        if self.in_contact && error[1] > 0.0 {
+            error[1] = 0.0;
+        }
+    }
+}
+
+/// Tolerances of a character file (ε_r scaled down so the uncorrected estimate clearly limits
+/// the step): steps between 0.5 and 16 ms.
+fn floor_tolerances() -> Tolerances {
+    Tolerances {
+        fixed_step_s: 0.004,
+        min_step_s: 0.000_5,
+        max_step_s: 0.016,
+        position_tolerance: 1.0e-4,
+        ..Tolerances::default()
+    }
+}
+
+/// Runs `sys` from `(x, v)` for `seconds`, projecting the point onto the floor after each
+/// accepted step (`y < 0` → `y = 0`, downward velocity removed) and telling the system whether
+/// it touched. Returns the accepted steps after the first `settle_s` seconds and the
+/// number of rejections.
+fn run_on_floor(
+    kind: IntegratorKind,
+    sys: &mut OnFloor,
+    mut x: [f32; 2],
+    mut v: [f32; 2],
+    seconds: f64,
+    settle_s: f64,
+) -> (Vec<f64>, u32, [f32; 2]) {
+    let mut integ = Integrator::new(kind, floor_tolerances());
+    let (mut xn, mut vn) = ([0.0f32; 2], [0.0f32; 2]);
+    let mut t = 0.0;
+    let mut h = integ.initial_step_s();
+    let mut steps = Vec::new();
+    let mut rejected = 0;
+    while t < seconds {
+        let p = integ.propose(sys, t, h, &x, &v, &mut xn, &mut vn);
+        if !p.accepted {
+            rejected += 1;
+            h = p.next_step_s;
+            continue;
+        }
+        x = xn;
+        v = vn;
+        sys.in_contact = x[1] < 0.0;
+        if sys.in_contact {
+            x[1] = 0.0;
+            v[1] = v[1].max(0.0);
+        }
+        t += h;
+        if t > settle_s {
+            steps.push(h);
+        }
+        h = p.next_step_s;
+    }
+    (steps, rejected, x)
+}
+
+#[test]
+fn contact_aware_error_lets_a_resting_point_take_the_largest_step() {
+    let gravity = [0.0, -9.81];
+    for kind in [IntegratorKind::Verlet, IntegratorKind::Rk2] {
+        // The uncorrected estimate counts the fall into the floor, h² g / 2 ≤ ε_r:
+        // h ≤ sqrt(2 ε_r / g) ≈ 4.5 ms whatever the floor does.
+        let mut plain = OnFloor::new(gravity, false);
+        let (steps, _, x) = run_on_floor(kind, &mut plain, [0.0, 0.0], [0.0; 2], 2.0, 0.5);
+        let largest = steps.iter().copied().fold(0.0, f64::max);
+        assert!(largest < 0.005, "{kind:?} without the hook: step {largest}");
+        assert_eq!(x[1], 0.0, "{kind:?}: the point rests on the floor");
+        // With the hook the inward error is the floor's business: steps reach max_step_s.
+        let mut aware = OnFloor::new(gravity, true);
+        let (steps, rejected, x) = run_on_floor(kind, &mut aware, [0.0, 0.0], [0.0; 2], 2.0, 0.5);
+        let smallest = steps.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(
+            smallest >= 0.016 * (1.0 - 1e-9),
+            "{kind:?} with the hook: step {smallest} (rejected {rejected})"
+        );
+        assert_eq!(rejected, 0, "{kind:?}");
+        assert_eq!(x[1], 0.0, "{kind:?}: the point rests on the floor");
+    }
+}
+
+#[test]
+fn contact_aware_error_keeps_the_full_estimate_off_the_floor() {
+    // Falling freely from 1 m (no contact in 0.4 s; positions below r_thr, so the error is
+    // absolute): the hook must change nothing.
+    for kind in [IntegratorKind::Verlet, IntegratorKind::Rk2] {
+        let run = |aware| {
+            let mut sys = OnFloor::new([0.0, -9.81], aware);
+            run_on_floor(kind, &mut sys, [0.0, 1.0], [0.0; 2], 0.4, 0.0)
+        };
+        let (with_hook, rej_a, x_a) = run(true);
+        let (without, rej_b, x_b) = run(false);
+        assert_eq!(with_hook, without, "{kind:?}");
+        assert_eq!((rej_a, x_a), (rej_b, x_b), "{kind:?}");
+        assert!(x_a[1] > 0.0, "{kind:?}: still above the floor");
+        assert!(with_hook.iter().all(|h| *h < 0.005), "{kind:?}");
+    }
+}
+
+#[test]
+fn contact_aware_error_drops_only_the_inward_part() {
+    // One proposal from a point on the floor (in contact), sliding with a sideways
+    // acceleration: the error ratio keeps the sideways part and drops the downward part,
+    // and an outward (upward) acceleration is not dropped at all.
+    let h = 0.01;
+    let ratio = |kind, accel: [f32; 2], aware| {
+        let mut sys = OnFloor::new(accel, aware);
+        sys.in_contact = true;
+        let mut integ = Integrator::new(kind, floor_tolerances());
+        let (mut xn, mut vn) = ([0.0f32; 2], [0.0f32; 2]);
+        integ
+            .propose(&mut sys, 0.0, h, &[0.0, 0.0], &[0.1, 0.0], &mut xn, &mut vn)
+            .error_ratio
+    };
+    for kind in [IntegratorKind::Verlet, IntegratorKind::Rk2] {
+        let tol = floor_tolerances().position_tolerance;
+        let expect = |a: f64| 0.5 * h * h * a / tol;
+        // Down 9.81, sideways 2: only the sideways error is left.
+        let r = ratio(kind, [2.0, -9.81], true);
+        assert!(
+            (r - expect(2.0)).abs() < 1e-3 * expect(2.0),
+            "{kind:?}: {r}"
+        );
+        let r = ratio(kind, [2.0, -9.81], false);
+        assert!(
+            (r - expect(9.81)).abs() < 1e-3 * expect(9.81),
+            "{kind:?}: {r}"
+        );
+        // Up 9.81 (away from the floor): the full error counts.
+        let r = ratio(kind, [2.0, 9.81], true);
+        assert!(
+            (r - expect(9.81)).abs() < 1e-3 * expect(9.81),
+            "{kind:?}: {r}"
+        );
+    }
+}
