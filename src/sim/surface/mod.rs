@@ -69,6 +69,11 @@ struct Core {
     k_parallel: f32,
     k_perpendicular: f32,
     epsilon_c_m: f32,
+    /// The points the constraint phase moved in the last committed step: the next step's
+    /// error estimate leaves their inward error to the constraints
+    /// ([`SecondOrderSystem::absorbed_error`]). Part of the state, so a snapshot or checkpoint
+    /// continues exactly as the run it was taken from.
+    contacts: Vec<Contact>,
 }
 
 /// Scratch and caches (not part of a snapshot).
@@ -95,6 +100,19 @@ struct Work {
     flags: Vec<u8>,
     /// `(t, h, correction)` of the last constraint rejection (for root bracketing).
     last_constraint_reject: Option<(f64, f64, f32)>,
+    /// Points the constraint phase moved in the current candidate (all its passes), with the
+    /// direction it pushed each; promoted to `contacts` only when the candidate is committed.
+    candidate_contacts: Vec<Contact>,
+    /// `Core::contacts` at the checkpoint.
+    checkpoint_contacts: Vec<Contact>,
+}
+
+/// A free point the constraint phase moved, and the world unit direction it was pushed in
+/// (the muscle's outward normal there).
+#[derive(Debug, Clone, Copy)]
+struct Contact {
+    point: u32,
+    normal: Vec3,
 }
 
 /// The elastic surface layer model of one character.
@@ -108,6 +126,8 @@ pub struct SurfaceModel {
 struct Eval<'a> {
     input: ForceInput<'a>,
     scratch: &'a mut ForceScratch,
+    /// Contacts of the last committed step (see [`SecondOrderSystem::absorbed_error`]).
+    contacts: &'a [Contact],
     clock: Option<&'a dyn Clock>,
     force_time: Duration,
 }
@@ -136,6 +156,36 @@ impl SecondOrderSystem for Eval<'_> {
         let start = self.now();
         forces::add_velocity_accel(&self.input, self.scratch, v, a);
         self.add_time(start);
+    }
+    fn has_absorbed_error(&self) -> bool {
+        !self.contacts.is_empty()
+    }
+    /// For each point in contact after the last step, drops the error component along the
+    /// contact normal when it points into the muscle: the step went further in than Euler's,
+    /// and the constraint phase replaces that motion (checked against ε_c, section 4.2.3).
+    fn absorbed_error(&self, _x: &[f32], error: &mut [f32]) {
+        drop_inward_error(self.contacts, error);
+    }
+}
+
+/// Removes `max(e·n, 0) n` from each contact point's error `e` (SoA `[x…, y…, z…]` over the
+/// free points). A point listed more than once (moved by several passes or shapes) loses the
+/// inward part along each of its directions.
+fn drop_inward_error(contacts: &[Contact], error: &mut [f32]) {
+    let free = error.len() / 3;
+    for c in contacts {
+        let f = c.point as usize;
+        if f >= free {
+            continue;
+        }
+        let e = Vec3::new(error[f], error[free + f], error[2 * free + f]);
+        let inward = e.dot(c.normal);
+        if inward > 0.0 {
+            let kept = e - inward * c.normal;
+            error[f] = kept.x;
+            error[free + f] = kept.y;
+            error[2 * free + f] = kept.z;
+        }
     }
 }
 
@@ -349,6 +399,9 @@ impl SurfaceModel {
             self.work.checkpoint_v.clone_from(&self.core.v);
             self.work.checkpoint_t_s = self.core.t_s;
             self.work.checkpoint_step_s = self.core.step_s;
+            self.work
+                .checkpoint_contacts
+                .clone_from(&self.core.contacts);
         }
     }
 
@@ -358,12 +411,16 @@ impl SurfaceModel {
             self.core.v.clone_from(&self.work.checkpoint_v);
             self.core.t_s = self.work.checkpoint_t_s;
             self.core.step_s = self.work.checkpoint_step_s;
+            self.core
+                .contacts
+                .clone_from(&self.work.checkpoint_contacts);
         } else {
             // No checkpoint at this resolution: back to rest at the neutral posture.
             let rest = Core::rest_state(&self.core);
             self.core.x = rest;
             self.core.v.iter_mut().for_each(|v| *v = 0.0);
             self.core.step_s = self.core.tolerances.min_step_s;
+            self.core.contacts.clear();
         }
         self.work.last_constraint_reject = None;
         self.work.start_valid = false;
@@ -401,6 +458,7 @@ impl SurfaceModel {
                 kin: &w.kin,
             },
             scratch: &mut w.force,
+            contacts: &core.contacts,
             clock,
             force_time: Duration::ZERO,
         };
@@ -477,6 +535,7 @@ impl SurfaceModel {
         std::mem::swap(&mut w.shapes_start, &mut w.shapes_end);
         std::mem::swap(&mut w.kin.rings_start, &mut w.kin.rings_end);
         std::mem::swap(&mut w.kin.anchors_start, &mut w.kin.anchors_end);
+        std::mem::swap(&mut core.contacts, &mut w.candidate_contacts);
         w.start_valid = true;
     }
 }
@@ -630,6 +689,7 @@ impl Core {
             k_parallel: d.k_parallel,
             k_perpendicular: d.k_perpendicular,
             epsilon_c_m: d.epsilon_c_m,
+            contacts: Vec::new(),
             character,
         })
     }
@@ -1061,6 +1121,8 @@ impl DeformationModel for SurfaceModel {
             None
         };
         self.core = resample::resample(&self.core, around as usize, along as usize, current_rings);
+        // The contacts name points of the old grid.
+        self.core.contacts.clear();
         self.work.start_valid = false;
         self.work.broad.invalidate();
         self.work.checkpoint_x.clear();
@@ -1132,6 +1194,8 @@ fn constrain_candidate(
         None,
         &mut w.touched,
     );
+    w.candidate_contacts.clear();
+    record_contacts(&w.broad, &mut w.candidate_contacts);
     let mut passes = 0;
     // Corrections below this do not warrant another pass.
     let negligible_m = 0.1 * core.epsilon_c_m;
@@ -1157,6 +1221,7 @@ fn constrain_candidate(
             Some(&w.recheck),
             &mut w.touched,
         );
+        record_contacts(&w.broad, &mut w.candidate_contacts);
         last_corrected = if second.max_correction_m > negligible_m {
             second.corrected
         } else {
@@ -1169,4 +1234,12 @@ fn constrain_candidate(
         }
     }
     outcome
+}
+
+/// Appends the points the last constraint pass moved, with their push directions.
+fn record_contacts(broad: &Broadphase, out: &mut Vec<Contact>) {
+    out.extend(broad.last_moves().map(|(f, normal)| Contact {
+        point: f as u32,
+        normal,
+    }));
 }
