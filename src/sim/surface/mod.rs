@@ -863,7 +863,11 @@ impl DeformationModel for SurfaceModel {
                 }
                 Attempt::ErrorRejected { next_s } => {
                     report.rejected_steps += 1;
-                    self.core.step_s = next_s.min(0.5 * h).max(min_step);
+                    // The controller's own retry step (eq. 12 with the safety factor; at
+                    // least a `safety` shrink, so a retry always makes progress). Halving
+                    // regardless threw away half the step on errors just over ε_r.
+                    let safety = self.core.tolerances.safety.clamp(0.1, 0.9);
+                    self.core.step_s = next_s.min(safety * h).max(min_step);
                     if !self.core.kind.is_adaptive() {
                         // A fixed-step method only "rejects" on a bug; do not loop.
                         self.core.step_s = self.core.tolerances.fixed_step_s;
