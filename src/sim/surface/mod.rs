@@ -109,7 +109,7 @@ struct Work {
 
 /// A free point the constraint phase moved, and the world unit direction it was pushed in
 /// (the muscle's outward normal there).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct Contact {
     point: u32,
     normal: Vec3,

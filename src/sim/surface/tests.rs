@@ -1,6 +1,6 @@
 use super::*;
 use crate::character::examples;
-use crate::sim::{MaxAttempts, MotionPoses, Unlimited};
+use crate::sim::{FixedPosture, MaxAttempts, MotionPoses, Unlimited};
 
 fn model(name: &str, res: u32, kind: IntegratorKind) -> SurfaceModel {
     let c = examples::build(name, res, res).expect("example exists");
@@ -352,4 +352,55 @@ fn phase_times_come_from_the_clock_passed_in() {
     // Every interval is measured on the same clock: the phases add up to the whole call.
     let reads = clock.0.load(std::sync::atomic::Ordering::SeqCst);
     assert!(r.phases.total() <= Duration::from_micros(reads));
+}
+
+#[test]
+fn skin_resting_on_its_muscles_takes_the_largest_steps() {
+    // Neutral posture, gravity on: the skin settles onto the muscles and the constraint phase
+    // pushes it back out every step. The contact-aware error estimate leaves that inward pull
+    // to the constraints (ε_c), so Verlet's steps reach max_step_s; counting it
+    // (Δ ≈ h² g / 2 ≤ ε_r) capped them at 9-11 ms. (Not the torso: its 16×16 skin at the
+    // neutral posture keeps getting pushed out by about ε_c with or without this estimate,
+    // so its steps stay at about 1 ms, limited by constraint rejections.)
+    for name in ["penguin", "wombat", "arm"] {
+        let mut m = model(name, 16, IntegratorKind::Verlet);
+        let neutral = Posture::neutral(&m.character().skeleton);
+        let mut poses = FixedPosture(neutral);
+        m.advance(1.0, &mut poses, &mut Unlimited, None);
+        assert!(
+            !m.core.contacts.is_empty(),
+            "{name}: the skin rests on muscles"
+        );
+        let r = m.advance(2.0, &mut poses, &mut Unlimited, None);
+        let max_step_s = m.tolerances().max_step_s;
+        eprintln!("{name} at rest: {r:?}");
+        assert!(
+            r.max_step_s >= 0.99 * max_step_s,
+            "{name}: largest step {} s, max {max_step_s} s",
+            r.max_step_s
+        );
+        assert!(m.max_depth_m() <= m.epsilon_c_m(), "{name}");
+        assert!(all_finite(&m));
+    }
+}
+
+#[test]
+fn contacts_of_an_uncommitted_candidate_do_not_leak() {
+    let mut a = model("penguin", 16, IntegratorKind::Verlet);
+    let motion = a.character().motions[0].clone();
+    let mut poses = MotionPoses(&motion);
+    a.advance(0.3, &mut poses, &mut Unlimited, None);
+    let mut b = a.clone();
+    let contacts = a.core.contacts.clone();
+    assert!(!contacts.is_empty());
+    // A constraint phase on a candidate that is never committed (the benchmark hook runs one
+    // on a copy of the state): the contacts the next step uses stay those of the last commit.
+    a.enforce_constraints_once(&mut poses, 0.01);
+    assert_eq!(a.core.contacts, contacts);
+    a.advance(0.6, &mut poses, &mut Unlimited, None);
+    b.advance(0.6, &mut poses, &mut Unlimited, None);
+    assert_eq!((&a.core.x, &a.core.v), (&b.core.x, &b.core.v));
+    // A resolution change forgets them (they name points of the old grid).
+    a.set_resolution(12, 12).expect("valid");
+    assert!(a.core.contacts.is_empty());
 }
