@@ -23,8 +23,9 @@
 //!   any that do not land within [`PROJECTION_TOLERANCE_M`]).
 //! - **Rounds.** Shapes are visited in order and each sees the points the earlier ones moved
 //!   (Gauss-Seidel); a point pushed out of one muscle into an overlapping one is caught by the
-//!   next round, which tests only the points the previous round moved (at most
-//!   [`MAX_ROUNDS`]).
+//!   next round, which tests only the points the previous round moved, each against the
+//!   shapes other than the one that moved it (at most [`MAX_ROUNDS`]). Runs with few points to
+//!   test (later rounds, re-checks) are tested point by point instead of over the whole run.
 
 #![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
 
@@ -81,9 +82,11 @@ struct PassScratch {
     hit: Vec<u8>,
     /// The hits' positions in the run.
     hit_index: Vec<u32>,
+    /// The gated points' positions in a sparse run.
+    gated_index: Vec<u32>,
     batch: Batch,
     project: Batch,
-    /// Number of gated points before each index (rounds and re-checks).
+    /// Number of gated points before each index.
     gate_prefix: Vec<u32>,
     /// The runs of one shape that hold gated points.
     active_runs: Vec<(u32, u32)>,
@@ -335,17 +338,14 @@ pub fn enforce(
         let mut changed = 0usize;
         // Gated points up to each index, so runs without any are skipped outright.
         let everyone = round == 0 && only.is_none();
-        if !everyone {
-            sc.gate_prefix.clear();
-            sc.gate_prefix.push(0);
-            let mut total = 0u32;
-            for g in &sc.gate {
-                total += u32::from(*g);
-                sc.gate_prefix.push(total);
-            }
-            if total == 0 {
-                break;
-            }
+        sc.gate_prefix.resize(free + 1, 0);
+        let mut total = 0u32;
+        for (p, g) in sc.gate_prefix[1..].iter_mut().zip(&sc.gate) {
+            total += u32::from(*g);
+            *p = total;
+        }
+        if total == 0 {
+            break;
         }
         for (s_idx, s) in shapes.iter().enumerate() {
             let (a, b) = (
@@ -476,7 +476,8 @@ fn sphere_stage(
     let mut moved = 0;
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
-        filter_run(sc, a, b, Filter::Sphere { center: c, r2 });
+        let filter = Filter::Sphere { center: c, r2 };
+        filter_run(sc, a, b, filter, skip_own(s_idx, round));
         let found = std::mem::take(&mut sc.hit_index);
         for &i in &found {
             let f = a + i as usize;
@@ -517,15 +518,11 @@ fn general_stage(
     sc.batch.clear();
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
-        filter_run(
-            sc,
-            a,
-            b,
-            Filter::Box {
-                shape_from_world: t,
-                extent,
-            },
-        );
+        let filter = Filter::Box {
+            shape_from_world: t,
+            extent,
+        };
+        filter_run(sc, a, b, filter, skip_own(s_idx, round));
         for &i in &sc.hit_index {
             let f = a + i as usize;
             let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
@@ -597,6 +594,9 @@ fn general_stage(
     moved
 }
 
+/// A run whose gated points are fewer than its length over this is tested point by point.
+const SPARSE_RATIO: usize = 6;
+
 /// The first stage's test of one shape.
 enum Filter<'a> {
     /// Strictly inside an undeformed sphere (`|q − center|² < r2`).
@@ -608,11 +608,63 @@ enum Filter<'a> {
     },
 }
 
-/// Runs `filter` over the gated fat points of the run `[a, b)` and leaves the positions (in
-/// the run) of those that pass in `sc.hit_index`.
-fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>) {
+/// The shape whose own points a round skips: in rounds after the first, the points a shape
+/// moved in the previous round lie on its surface (projected there), so only the other shapes
+/// test them again. None (`u32::MAX`) in the first round.
+#[inline]
+fn skip_own(s_idx: u32, round: u8) -> u32 {
+    if round > 0 { s_idx } else { u32::MAX }
+}
+
+impl Filter<'_> {
+    /// The test for one point, with the same arithmetic as the vectorised kernels.
+    #[inline]
+    fn contains(&self, q: Vec3) -> bool {
+        match *self {
+            Filter::Sphere { center: c, r2 } => {
+                let (dx, dy, dz) = (q.x - c.x, q.y - c.y, q.z - c.z);
+                dx * dx + dy * dy + dz * dz < r2
+            }
+            Filter::Box {
+                shape_from_world,
+                extent,
+            } => {
+                let m = shape_from_world.matrix3;
+                let (cx, cy, cz) = (m.x_axis, m.y_axis, m.z_axis);
+                let o = shape_from_world.translation;
+                let lx = cx.x * q.x + cy.x * q.y + cz.x * q.z + o.x;
+                let ly = cx.y * q.x + cy.y * q.y + cz.y * q.z + o.y;
+                let lz = cx.z * q.x + cy.z * q.y + cz.z * q.z + o.z;
+                lx.abs() <= extent.x && ly.abs() <= extent.y && lz.abs() <= extent.z
+            }
+        }
+    }
+}
+
+/// Runs `filter` over the gated fat points of the run `[a, b)` (except those whose last move
+/// was by shape `skip`) and leaves the positions (in the run) of those that pass in
+/// `sc.hit_index`.
+fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, skip: u32) {
     let len = b - a;
     sc.hit.resize(len.next_multiple_of(8), 0);
+    let gated = (sc.gate_prefix[b] - sc.gate_prefix[a]) as usize;
+    if gated * SPARSE_RATIO < len {
+        // Few gated points (later rounds, re-checks): test just those.
+        sc.hit[..len].copy_from_slice(&sc.gate[a..b]);
+        sc.hit[len..].fill(0);
+        let mut gated = std::mem::take(&mut sc.gated_index);
+        collect_hits(&sc.hit, &mut gated);
+        sc.hit_index.clear();
+        for &i in &gated {
+            let f = a + i as usize;
+            let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
+            if filter.contains(q) && sc.last_shape[f] != skip {
+                sc.hit_index.push(i);
+            }
+        }
+        sc.gated_index = gated;
+        return;
+    }
     let (qx, qy, qz, gate) = (
         &sc.q[0][a..b],
         &sc.q[1][a..b],
@@ -629,6 +681,10 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>) {
     }
     sc.hit[len..].fill(0);
     collect_hits(&sc.hit, &mut sc.hit_index);
+    if skip != u32::MAX {
+        let last = &sc.last_shape[a..b];
+        sc.hit_index.retain(|&i| last[i as usize] != skip);
+    }
 }
 
 /// Appends the indices of the non-zero bytes of `mask` (whose length is a multiple of 8) to
