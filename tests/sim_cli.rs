@@ -129,3 +129,25 @@ fn simulate_bad_arguments_say_what_is_wrong() {
         assert!(err.contains(needle), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
+    // `leman simulate … | head -0`: the reader is gone before the report is written.
+    let mut child = leman()
+        .args([
+            "simulate",
+            "assets/characters/penguin_16.toml",
+            "--seconds",
+            "0.05",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("leman starts");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("leman ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("writing the report"), "{stderr}");
+}

@@ -2,6 +2,7 @@
 //! Table-1 style report (LEMAN paper, section 7), or one JSON object with `--json`
 //! (shape documented in docs/simulate.md).
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -247,37 +248,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         nonfinite_events: total.nonfinite_events,
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
     };
+    // Written, not printed: a closed pipe (`| head`) is an error message, not a panic.
+    let mut out = std::io::stdout().lock();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)
     } else {
-        print_table(&report, wall);
+        print_table(&report, wall, &mut out)
     }
-    Ok(())
+    .context("writing the report to standard output")
 }
 
-fn print_table(r: &Report, wall: Duration) {
+fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Result<()> {
     let ms = |s: f64| s * 1000.0;
-    println!("{:<28}{}", "Character", r.character);
-    println!(
+    writeln!(out, "{:<28}{}", "Character", r.character)?;
+    writeln!(
+        out,
         "{:<28}{} mass points ({}×{})",
         "Skin mesh", r.skin_points, r.resolution[0], r.resolution[1]
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "{:<28}{} spheres, {} superellipsoids, {} cylinders",
         "Muscle layer", r.muscles.spheres, r.muscles.superellipsoids, r.muscles.cylinders
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "{:<28}{}",
         "Motion",
         r.motion.as_deref().unwrap_or("(neutral posture)")
-    );
-    println!("{:<28}{}", "Solver", r.integrator);
-    println!(
+    )?;
+    writeln!(out, "{:<28}{}", "Solver", r.integrator)?;
+    writeln!(
+        out,
         "{:<28}[{:.2}–{:.2}]",
         "Timestep interval (ms)",
         ms(r.step_secs.min),
         ms(r.step_secs.max)
-    );
+    )?;
     let speed = if r.slowdown >= 1.0 {
         format!("{:.2}× (slower than real time)", r.slowdown)
     } else {
@@ -287,37 +294,49 @@ fn print_table(r: &Report, wall: Duration) {
             1.0 / r.slowdown
         )
     };
-    println!("{:<28}{speed}", "Simulation slowdown");
-    println!(
+    writeln!(out, "{:<28}{speed}", "Simulation slowdown")?;
+    writeln!(
+        out,
         "{:<28}{:.1}",
         "% Force evaluation",
         100.0 * r.phase_fraction.force
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "{:<28}{:.1}",
         "% Constraints",
         100.0 * r.phase_fraction.constraints
-    );
-    println!("{:<28}{:.1}", "% Other", 100.0 * r.phase_fraction.other);
-    println!(
+    )?;
+    writeln!(
+        out,
+        "{:<28}{:.1}",
+        "% Other",
+        100.0 * r.phase_fraction.other
+    )?;
+    writeln!(
+        out,
         "{:<28}{} accepted, {} rejected ({} by constraints), {} forced",
         "Steps", r.steps, r.rejected_steps, r.constraint_rejections, r.forced_steps
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "{:<28}{:.3e}",
         "Point-steps per second", r.point_steps_per_second
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "{:<28}{:.2} mm (final state {:.3} mm)",
         "Max penetration",
         r.max_penetration_m * 1000.0,
         r.final_max_depth_m * 1000.0
-    );
-    println!("{:<28}{}", "Non-finite events", r.nonfinite_events);
-    println!(
+    )?;
+    writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
+    writeln!(
+        out,
         "{:<28}{:.3} s simulated in {:.3} s",
         "Time",
         r.sim_seconds,
         wall.as_secs_f64()
-    );
+    )?;
+    Ok(())
 }
