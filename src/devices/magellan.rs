@@ -140,10 +140,13 @@ impl MagellanDecoder {
         if frame.is_empty() {
             return;
         }
-        // Fixed-form packets first (anywhere in the frame), then text replies: a text reply
-        // would otherwise swallow a `d` packet glued behind garbage holding an `e` or `v`.
+        // Fixed-form packets first (anywhere in the frame, even behind a leading `e` or `v`:
+        // garbage ending in one of those would otherwise turn the `d` packet glued behind it
+        // into an error or version text), then the frame's own start, then text replies.
+        let fixed = |s: usize| matches!(frame[s], b'd' | b'k');
         let starts = (0..frame.len())
-            .filter(|&s| s == 0 || matches!(frame[s], b'd' | b'k'))
+            .filter(|&s| fixed(s))
+            .chain((!fixed(0)).then_some(0))
             .chain((1..frame.len()).filter(|&s| matches!(frame[s], b'v' | b'e')));
         for start in starts {
             if let Some(event) = Self::parse(&frame[start..]) {
@@ -183,6 +186,20 @@ mod tests {
     use super::*;
     use crate::devices::encode::magellan::{encode_d, encode_k, encode_version};
     use crate::devices::test_util::{assert_every_split, axes, buttons, dropped, feed_all};
+
+    #[test]
+    fn a_data_packet_behind_a_stray_e_or_v_is_not_taken_for_text() {
+        // Found by the property test: garbage ending in `e` glued to a `d` packet became the
+        // error text "edH000…" and the axes were lost.
+        for stray in [b"e".as_slice(), b"v", b"xxe", b"e12"] {
+            let mut bytes = stray.to_vec();
+            bytes.extend(encode_d([0, 5, -7, 100, -100, 32767]));
+            let events = feed_all(&mut MagellanDecoder::new(), &bytes);
+            let a = axes(&events);
+            assert_eq!(a.len(), 1, "{stray:?}: {events:?}");
+            assert_eq!(a[0].raw, [0, 5, -7, 100, -100, 32767]);
+        }
+    }
 
     #[test]
     fn nibble_alphabet_carries_the_low_four_bits() {
