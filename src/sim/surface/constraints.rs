@@ -523,11 +523,7 @@ fn general_stage(
             extent,
         };
         filter_run(sc, a, b, filter, skip_own(s_idx, round));
-        for &i in &sc.hit_index {
-            let f = a + i as usize;
-            let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
-            sc.batch.push(f as u32, t.transform_point3(q));
-        }
+        sc.batch.extend_mapped(a, &sc.hit_index, &sc.q, t);
     }
     if sc.batch.is_empty() {
         return 0;

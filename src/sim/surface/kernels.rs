@@ -59,6 +59,37 @@ impl Batch {
         self.p[2].push(p.z);
     }
 
+    /// Appends the points `base + i` for each `i` in `hits`, read from the world SoA arrays `q`
+    /// and mapped by `shape_from_world` (filled by index: one resize per call, not four pushes
+    /// per point).
+    pub fn extend_mapped(
+        &mut self,
+        base: usize,
+        hits: &[u32],
+        q: &[Vec<f32>; 3],
+        shape_from_world: &glam::Affine3A,
+    ) {
+        let start = self.len();
+        let end = start + hits.len();
+        self.point.resize(end, 0);
+        for c in &mut self.p {
+            c.resize(end, 0.0);
+        }
+        let [px, py, pz] = &mut self.p;
+        let out = self.point[start..]
+            .iter_mut()
+            .zip(&mut px[start..])
+            .zip(&mut py[start..])
+            .zip(&mut pz[start..]);
+        for ((((point, x), y), z), &i) in out.zip(hits) {
+            let f = base + i as usize;
+            let world = Vec3::new(q[0][f], q[1][f], q[2][f]);
+            let local = shape_from_world.transform_point3(world);
+            *point = f as u32;
+            (*x, *y, *z) = (local.x, local.y, local.z);
+        }
+    }
+
     /// Entry `i`'s shape-space position.
     #[inline]
     pub fn position(&self, i: usize) -> Vec3 {
