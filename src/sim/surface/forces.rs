@@ -200,6 +200,48 @@ pub fn grid_normals(around: usize, along: usize, grid: &[Vec<f32>; 3], out: &mut
     normals_pass(m, along, grid, out);
 }
 
+/// Unit outward normals on the full grid like [`grid_normals`], but from differences over
+/// `stride` nodes each way (wrapping around, clamped along), SoA. With a stride of 1 it is
+/// [`grid_normals`].
+pub fn grid_normals_strided(
+    around: usize,
+    along: usize,
+    stride: (usize, usize),
+    grid: &[Vec<f32>; 3],
+    out: &mut [Vec<f32>; 3],
+) {
+    let (si, sj) = (stride.0.max(1), stride.1.max(1));
+    if si == 1 && sj == 1 {
+        grid_normals(around, along, grid, out);
+        return;
+    }
+    let m = around;
+    resize3(out, m * along);
+    if m < 2 || along < 2 || grid.iter().any(|g| g.len() != m * along) {
+        return;
+    }
+    let si = si.min(m / 2).max(1);
+    let g = grid;
+    for j in 0..along {
+        let jp = (j + sj).min(along - 1);
+        let jm = j.saturating_sub(sj);
+        for i in 0..m {
+            let ip = (i + si) % m;
+            let im = (i + m - si) % m;
+            let (a, b) = (j * m + ip, j * m + im);
+            let (c, d) = (jp * m + i, jm * m + i);
+            let n = unit_normal(
+                [g[0][a] - g[0][b], g[1][a] - g[1][b], g[2][a] - g[2][b]],
+                [g[0][c] - g[0][d], g[1][c] - g[1][d], g[2][c] - g[2][d]],
+            );
+            let k = j * m + i;
+            out[0][k] = n[0];
+            out[1][k] = n[1];
+            out[2][k] = n[2];
+        }
+    }
+}
+
 /// The normal at node `(i, j)` from the grid, by the definition (wrap around, one-sided ends).
 #[inline(always)]
 fn normal_node(m: usize, along: usize, g: &[Vec<f32>; 3], i: usize, j: usize) -> [f32; 3] {
@@ -1275,6 +1317,46 @@ mod kernel_tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn strided_normals_see_through_wrinkles_finer_than_the_stride() {
+        // A cylinder of radius 0.1 m along +Y, 64 around, with a 2 mm wrinkle of period 4
+        // nodes around: one-node differences tilt the normals by the wrinkle's slope, two-node
+        // differences span a whole half period and stay radial.
+        let (m, n) = (64usize, 12usize);
+        let mut grid: [Vec<f32>; 3] = Default::default();
+        for j in 0..n {
+            for i in 0..m {
+                let a = std::f32::consts::TAU * i as f32 / m as f32;
+                let r = 0.1 + 0.002 * (std::f32::consts::FRAC_PI_2 * i as f32).sin();
+                grid[0].push(r * a.cos());
+                grid[1].push(0.05 * j as f32);
+                grid[2].push(r * a.sin());
+            }
+        }
+        let worst_tilt = |stride: (usize, usize)| {
+            let mut out: [Vec<f32>; 3] = Default::default();
+            grid_normals_strided(m, n, stride, &grid, &mut out);
+            let mut worst = 0.0f32;
+            for j in 1..n - 1 {
+                for i in 0..m {
+                    let k = j * m + i;
+                    let radial = Vec3::new(grid[0][k], 0.0, grid[2][k]).normalize();
+                    let got = Vec3::new(out[0][k], out[1][k], out[2][k]);
+                    worst = worst.max(got.angle_between(radial));
+                }
+            }
+            worst
+        };
+        let (one, two) = (worst_tilt((1, 1)), worst_tilt((2, 2)));
+        assert!(one > 0.1, "one-node normals follow the wrinkle: {one} rad");
+        assert!(two < 0.01, "two-node normals do not: {two} rad");
+        // A stride of 1 is the ordinary grid normal.
+        let (mut a, mut b): ([Vec<f32>; 3], [Vec<f32>; 3]) = Default::default();
+        grid_normals_strided(m, n, (1, 1), &grid, &mut a);
+        grid_normals(m, n, &grid, &mut b);
+        assert_eq!(a, b);
     }
 
     #[test]
