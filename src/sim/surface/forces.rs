@@ -220,20 +220,10 @@ pub fn grid_normals_strided(
     if m < 2 || along < 2 || grid.iter().any(|g| g.len() != m * along) {
         return;
     }
-    let si = si.min(m / 2).max(1);
-    let g = grid;
+    let stride = (si.min(m / 2).max(1), sj);
     for j in 0..along {
-        let jp = (j + sj).min(along - 1);
-        let jm = j.saturating_sub(sj);
         for i in 0..m {
-            let ip = (i + si) % m;
-            let im = (i + m - si) % m;
-            let (a, b) = (j * m + ip, j * m + im);
-            let (c, d) = (jp * m + i, jm * m + i);
-            let n = unit_normal(
-                [g[0][a] - g[0][b], g[1][a] - g[1][b], g[2][a] - g[2][b]],
-                [g[0][c] - g[0][d], g[1][c] - g[1][d], g[2][c] - g[2][d]],
-            );
+            let n = normal_node_strided(m, along, grid, i, j, stride);
             let k = j * m + i;
             out[0][k] = n[0];
             out[1][k] = n[1];
@@ -245,10 +235,25 @@ pub fn grid_normals_strided(
 /// The normal at node `(i, j)` from the grid, by the definition (wrap around, one-sided ends).
 #[inline(always)]
 fn normal_node(m: usize, along: usize, g: &[Vec<f32>; 3], i: usize, j: usize) -> [f32; 3] {
-    let jp = if j + 1 < along { j + 1 } else { j };
-    let jm = j.saturating_sub(1);
-    let ip = if i + 1 == m { 0 } else { i + 1 };
-    let im = if i == 0 { m - 1 } else { i - 1 };
+    normal_node_strided(m, along, g, i, j, (1, 1))
+}
+
+/// The normal at node `(i, j)` from differences over `stride` nodes (around, along), wrapping
+/// around and clamped along (`stride.0 < m`).
+#[inline(always)]
+fn normal_node_strided(
+    m: usize,
+    along: usize,
+    g: &[Vec<f32>; 3],
+    i: usize,
+    j: usize,
+    stride: (usize, usize),
+) -> [f32; 3] {
+    let (si, sj) = stride;
+    let jp = (j + sj).min(along - 1);
+    let jm = j.saturating_sub(sj);
+    let ip = (i + si) % m;
+    let im = (i + m - si) % m;
     let (a, b) = (j * m + ip, j * m + im);
     let (c, d) = (jp * m + i, jm * m + i);
     unit_normal(
