@@ -272,8 +272,7 @@ impl SurfaceModel {
     pub fn max_depth_m(&self) -> f32 {
         let grid = self.current_grid();
         let mut normals = Default::default();
-        let (m, n) = (self.core.around, self.core.along);
-        forces::grid_normals_strided(m, n, fat_stride(&self.core), &grid, &mut normals);
+        fat_normals(&self.core, &grid, &mut normals);
         let shapes = if self.work.start_valid {
             self.work.shapes_start.clone()
         } else {
@@ -1176,13 +1175,7 @@ fn constrain_candidate(
         0.0,
         &mut w.force.grid,
     );
-    forces::grid_normals_strided(
-        core.around,
-        core.along,
-        fat_stride(core),
-        &w.force.grid,
-        &mut w.normals,
-    );
+    fat_normals(core, &w.force.grid, &mut w.normals);
     w.x_unconstrained.clone_from(&w.x_new);
     let max_fat = core.materials.fat_m.iter().fold(0.0f32, |a, b| a.max(*b));
     let input = ConstraintInput {
@@ -1223,13 +1216,7 @@ fn constrain_candidate(
         // points: further passes over the corrected points and their neighbours with the
         // new normals, until nothing moves (at most 4).
         passes += 1;
-        forces::grid_normals_strided(
-            core.around,
-            core.along,
-            fat_stride(core),
-            &w.force.grid,
-            &mut w.normals,
-        );
+        fat_normals(core, &w.force.grid, &mut w.normals);
         constraints::neighbourhood(core.around, free, &w.touched, &mut w.flags, &mut w.recheck);
         let second = constraints::enforce(
             &input,
@@ -1320,6 +1307,11 @@ fn absorb_cancelled_velocity(
 /// fewer each way use one-node differences, as the forces and the renderer do.
 fn fat_stride(core: &Core) -> (usize, usize) {
     ((core.around / 32).max(1), (core.along / 32).max(1))
+}
+
+/// The normals that offset the fat points of `grid` (the full grid of `core`'s skin).
+fn fat_normals(core: &Core, grid: &[Vec<f32>; 3], out: &mut [Vec<f32>; 3]) {
+    forces::grid_normals_strided(core.around, core.along, fat_stride(core), grid, out);
 }
 
 /// Appends the points the last constraint pass moved, with their push directions.
