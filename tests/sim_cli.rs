@@ -151,3 +151,28 @@ fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("writing the report"), "{stderr}");
 }
+
+#[test]
+fn simulate_motion_none_holds_the_neutral_posture() {
+    // As `--help` says: `--motion none` runs without a motion (the JSON's motion is null).
+    let out = leman()
+        .args([
+            "simulate",
+            "penguin_16",
+            "--motion",
+            "none",
+            "--seconds",
+            "0.1",
+            "--json",
+        ])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert!(v["motion"].is_null(), "{v}");
+    assert!((v["sim_seconds"].as_f64().expect("number") - 0.1).abs() < 1e-6);
+}

@@ -23,7 +23,8 @@ pub struct Args {
     /// Character file (TOML), or an example name (`penguin`, `wombat`, `torso`, `arm`, or
     /// `torso_16` for the 16×16 version) looked up in assets/characters/.
     pub character: String,
-    /// Motion to play (default: the character's first motion; none: the neutral posture).
+    /// Motion to play (default: the character's first motion; `none`: hold the neutral
+    /// posture, unless the character has a motion of that name).
     #[arg(long)]
     pub motion: Option<String>,
     /// Simulated seconds (default: one pass of the motion, at least 2 s).
@@ -149,6 +150,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("--resolution {text}"))?;
     }
     let motion = match &args.motion {
+        Some(name) if name == "none" && character.motion(name).is_none() => None,
         Some(name) => Some(
             character
                 .motion(name)
