@@ -47,12 +47,6 @@ pub trait SecondOrderSystem {
         true
     }
 
-    /// Whether [`absorbed_error`](Self::absorbed_error) may change anything. When not (the
-    /// default), the adaptive methods take the full embedded error estimate in one fused pass.
-    fn has_absorbed_error(&self) -> bool {
-        false
-    }
-
     /// Removes from a step's position error the part the system's own constraints absorb.
     ///
     /// `error` holds, per degree of freedom and unscaled, the embedded Euler position minus the
@@ -61,8 +55,8 @@ pub trait SecondOrderSystem {
     /// the component of a contact point's error that points into the obstacle: the constraint
     /// replaces that part of the motion and controls it with its own tolerance ε_c, so it
     /// should not limit the step. The step control then takes the scaled ∞-norm (eq. 8, 11)
-    /// of what is left. Only called when [`has_absorbed_error`](Self::has_absorbed_error)
-    /// says so; the default leaves the error as it is.
+    /// of what is left. Called once per adaptive step proposal; the default leaves the error
+    /// as it is.
     fn absorbed_error(&self, x: &[f32], error: &mut [f32]) {
         let _ = (x, error);
     }
@@ -380,16 +374,12 @@ impl Integrator {
         }
         // (7h) r_{t+h} = r_{t+h/2} + h/2 v_{t+h}; (9, 11) Δ = ‖(r_t + h v_t − r_{t+h}) r_scale‖∞
         let r_thr = tol.position_threshold_m as f32;
-        let delta = if sys.has_absorbed_error() {
-            // The same with the error vector kept, so the system can drop what its
-            // constraints absorb before the norm is taken (reuses the velocity scales).
-            let error = inv_v_scale;
-            verlet_finish_error(x, v, x_half, v_new, half, h, x_new, error);
-            sys.absorbed_error(x, error);
-            scaled_max_abs(x, error, r_thr)
-        } else {
-            verlet_finish(x, v, x_half, v_new, half, h, r_thr, x_new)
-        };
+        // The error is kept as a vector so the system can drop what its constraints absorb
+        // before the norm is taken (it reuses the velocity scales' buffer).
+        let error = inv_v_scale;
+        verlet_finish(x, v, x_half, v_new, half, h, x_new, error);
+        sys.absorbed_error(x, error);
+        let delta = scaled_max_abs(x, error, r_thr);
         let mut ratio = f64::from(delta) / tol.position_tolerance;
         if !delta.is_finite() {
             ratio = f64::INFINITY;
@@ -432,10 +422,8 @@ impl Integrator {
         sys.add_velocity_accel(t_s + h64, x1, v1, a2);
         let r_thr = tol.position_threshold_m as f32;
         let v_thr = tol.velocity_threshold_m_per_s as f32;
-        // With constraints that absorb part of the position error, that error is kept as a
-        // vector (Euler minus Heun) for the system to trim before its norm is taken; the
-        // velocity error is used as it is either way.
-        let keep = sys.has_absorbed_error();
+        // The position error is kept as a vector (Euler minus Heun) for the system to trim
+        // what its constraints absorb before its norm is taken; the velocity error is not.
         let mut err = 0.0f32;
         for i in 0..x.len() {
             // Heun: x₂ = x + h/2 (v + v₁), v₂ = v + h/2 (a₁ + a₂); Euler: (x₁, v₁).
@@ -444,20 +432,13 @@ impl Integrator {
             // Velocity error is scaled to a position-like quantity by multiplying with h so one
             // tolerance governs both (both are O(h²)).
             let ev = h * (vn - v1[i]).abs() / v[i].abs().max(v_thr);
-            if keep {
-                error[i] = x1[i] - xn;
-                err = err.max(ev);
-            } else {
-                let ex = (xn - x1[i]).abs() / x[i].abs().max(r_thr);
-                err = err.max(ex).max(ev);
-            }
+            error[i] = x1[i] - xn;
+            err = err.max(ev);
             x_new[i] = xn;
             v_new[i] = vn;
         }
-        if keep {
-            sys.absorbed_error(x, error);
-            err = err.max(scaled_max_abs(x, error, r_thr));
-        }
+        sys.absorbed_error(x, error);
+        err = err.max(scaled_max_abs(x, error, r_thr));
         let ratio = if err.is_finite() {
             f64::from(err) / tol.position_tolerance
         } else {
@@ -663,54 +644,11 @@ crate::sim::simd::multiversion! {
 }
 
 crate::sim::simd::multiversion! {
-    /// Verlet's last pass (eq. 7h, 9, 11): `x_new = x_half + h/2 v_new` and returns the scaled
-    /// embedded-Euler error `max |x + h v − x_new| / max(|x|, r_thr)` (NaN or ∞ when any is).
+    /// Verlet's last pass (eq. 7h, 9): `x_new = x_half + h/2 v_new` and the unscaled
+    /// embedded-Euler error `error = x + h v − x_new`, which the system may trim
+    /// ([`SecondOrderSystem::absorbed_error`]) before [`scaled_max_abs`] takes its norm (eq. 11).
     #[allow(clippy::too_many_arguments)]
     fn verlet_finish(
-        x: &[f32],
-        v: &[f32],
-        x_half: &[f32],
-        v_new: &[f32],
-        half: f32,
-        h: f32,
-        r_thr: f32,
-        x_new: &mut [f32],
-    ) -> f32 {
-        use crate::sim::simd::{LANES, MaxLanes};
-        #[inline(always)]
-        #[allow(clippy::too_many_arguments)]
-        fn one(x: f32, v: f32, x_half: f32, v_new: f32, half: f32, h: f32, r_thr: f32, x_new: &mut f32) -> f32 {
-            let xn = x_half + half * v_new;
-            *x_new = xn;
-            let euler = x + h * v;
-            (euler - xn).abs() / x.abs().max(r_thr)
-        }
-        let mut acc = MaxLanes::new();
-        let (xc, xr) = x.as_chunks::<LANES>();
-        let (vc, vr) = v.as_chunks::<LANES>();
-        let (xhc, xhr) = x_half.as_chunks::<LANES>();
-        let (vnc, vnr) = v_new.as_chunks::<LANES>();
-        let (xnc, xnr) = x_new.as_chunks_mut::<LANES>();
-        for ((((x, v), x_half), v_new), x_new) in xc.iter().zip(vc).zip(xhc).zip(vnc).zip(xnc) {
-            for l in 0..LANES {
-                acc.push(l, one(x[l], v[l], x_half[l], v_new[l], half, h, r_thr, &mut x_new[l]));
-            }
-        }
-        for (l, ((((x, v), x_half), v_new), x_new)) in
-            xr.iter().zip(vr).zip(xhr).zip(vnr).zip(xnr).enumerate()
-        {
-            acc.push(l, one(*x, *v, *x_half, *v_new, half, h, r_thr, x_new));
-        }
-        acc.finish()
-    }
-}
-
-crate::sim::simd::multiversion! {
-    /// [`verlet_finish`] keeping the error vector: `x_new = x_half + h/2 v_new` and
-    /// `error = x + h v − x_new` (unscaled), for a system that trims the error
-    /// ([`SecondOrderSystem::absorbed_error`]) before [`scaled_max_abs`] takes its norm.
-    #[allow(clippy::too_many_arguments)]
-    fn verlet_finish_error(
         x: &[f32],
         v: &[f32],
         x_half: &[f32],

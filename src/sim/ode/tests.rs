@@ -272,13 +272,10 @@ impl SecondOrderSystem for OnFloor {
     fn has_velocity_forces(&self) -> bool {
         false
     }
-    fn has_absorbed_error(&self) -> bool {
-        self.contact_aware && self.in_contact
-    }
     fn absorbed_error(&self, _x: &[f32], error: &mut [f32]) {
         // Outward normal (0, 1): e·n > 0 means the step went further into the floor than
         // Euler's; the floor constraint replaces that part.
-        if self.in_contact && error[1] > 0.0 {
+        if self.contact_aware && self.in_contact && error[1] > 0.0 {
             error[1] = 0.0;
         }
     }

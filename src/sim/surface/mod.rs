@@ -159,9 +159,6 @@ impl SecondOrderSystem for Eval<'_> {
         forces::add_velocity_accel(&self.input, self.scratch, v, a);
         self.add_time(start);
     }
-    fn has_absorbed_error(&self) -> bool {
-        !self.contacts.is_empty()
-    }
     /// For each point in contact after the last step, drops the error component along the
     /// contact normal when it points into the muscle: the step went further in than Euler's,
     /// and the constraint phase replaces that motion (checked against ε_c, section 4.2.3).
