@@ -9,26 +9,27 @@ fn leman() -> Command {
     c
 }
 
-#[test]
-fn simulate_prints_the_documented_json() {
-    let out = leman()
-        .args([
-            "simulate",
-            "arm_16",
-            "--seconds",
-            "0.3",
-            "--integrator",
-            "verlet",
-            "--json",
-        ])
-        .output()
-        .expect("runs");
+/// Runs `leman simulate ARGS`, which must succeed, and returns its standard output.
+fn simulate(args: &[&str]) -> String {
+    let out = leman().arg("simulate").args(args).output().expect("runs");
     assert!(
         out.status.success(),
-        "{}",
+        "{args:?}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Runs `leman simulate ARGS --json` and returns the one JSON object it prints.
+fn simulate_json(args: &[&str]) -> serde_json::Value {
+    let mut all = args.to_vec();
+    all.push("--json");
+    serde_json::from_str(&simulate(&all)).expect("one JSON object")
+}
+
+#[test]
+fn simulate_prints_the_documented_json() {
+    let v = simulate_json(&["arm_16", "--seconds", "0.3", "--integrator", "verlet"]);
     for key in [
         "sim_seconds",
         "wall_seconds",
@@ -64,47 +65,14 @@ fn simulate_prints_the_documented_json() {
 #[test]
 fn simulate_table_and_resolution_and_every_integrator() {
     for integrator in ["euler", "rk2", "rk4"] {
-        let out = leman()
-            .args([
-                "simulate",
-                "penguin_16",
-                "--seconds",
-                "0.1",
-                "--integrator",
-                integrator,
-            ])
-            .output()
-            .expect("runs");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let text = String::from_utf8_lossy(&out.stdout);
+        let text = simulate(&["penguin_16", "--seconds", "0.1", "--integrator", integrator]);
         assert!(
             text.contains("Timestep interval (ms)") && text.contains("% Constraints"),
             "{text}"
         );
         assert!(text.contains(integrator));
     }
-    let out = leman()
-        .args([
-            "simulate",
-            "penguin_16",
-            "--seconds",
-            "0.05",
-            "--resolution",
-            "12x10",
-            "--json",
-        ])
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let v = simulate_json(&["penguin_16", "--seconds", "0.05", "--resolution", "12x10"]);
     assert_eq!(v["skin_points"], 120);
 }
 
@@ -155,24 +123,7 @@ fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
 #[test]
 fn simulate_motion_none_holds_the_neutral_posture() {
     // As `--help` says: `--motion none` runs without a motion (the JSON's motion is null).
-    let out = leman()
-        .args([
-            "simulate",
-            "penguin_16",
-            "--motion",
-            "none",
-            "--seconds",
-            "0.1",
-            "--json",
-        ])
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let v = simulate_json(&["penguin_16", "--motion", "none", "--seconds", "0.1"]);
     assert!(v["motion"].is_null(), "{v}");
     assert!((v["sim_seconds"].as_f64().expect("number") - 0.1).abs() < 1e-6);
 }
