@@ -7,6 +7,15 @@ fn model(name: &str, res: u32, kind: IntegratorKind) -> SurfaceModel {
     SurfaceModel::new(c, kind).expect("example simulates")
 }
 
+/// A 16×16 example held at its neutral posture for its first simulated second (Verlet), and
+/// the posture source that keeps holding it.
+fn settled_at_rest(name: &str) -> (SurfaceModel, FixedPosture) {
+    let mut m = model(name, 16, IntegratorKind::Verlet);
+    let mut poses = FixedPosture(Posture::neutral(&m.character().skeleton));
+    m.advance(1.0, &mut poses, &mut Unlimited, None);
+    (m, poses)
+}
+
 fn all_finite(m: &SurfaceModel) -> bool {
     m.core.x.iter().chain(&m.core.v).all(|v| v.is_finite())
 }
@@ -362,10 +371,7 @@ fn skin_resting_on_its_muscles_takes_the_largest_steps() {
     // (Δ ≈ h² g / 2 ≤ ε_r) capped them at 9-11 ms. (Not the torso: at rest its steps reach
     // about 10.5 ms, not max_step_s; why was not investigated.)
     for name in ["penguin", "wombat", "arm"] {
-        let mut m = model(name, 16, IntegratorKind::Verlet);
-        let neutral = Posture::neutral(&m.character().skeleton);
-        let mut poses = FixedPosture(neutral);
-        m.advance(1.0, &mut poses, &mut Unlimited, None);
+        let (mut m, mut poses) = settled_at_rest(name);
         assert!(
             !m.core.contacts.is_empty(),
             "{name}: the skin rests on muscles"
@@ -411,10 +417,7 @@ fn skin_at_rest_stays_at_rest() {
     // kept 7-9 m/s while standing still, and the torso needed 812 constraint rejections and
     // 1 ms steps per simulated second.
     for name in ["torso", "penguin", "wombat", "arm"] {
-        let mut m = model(name, 16, IntegratorKind::Verlet);
-        let neutral = Posture::neutral(&m.character().skeleton);
-        let mut poses = FixedPosture(neutral);
-        m.advance(1.0, &mut poses, &mut Unlimited, None);
+        let (mut m, mut poses) = settled_at_rest(name);
         let r = m.advance(2.0, &mut poses, &mut Unlimited, None);
         let fastest = m
             .free_velocities()
