@@ -477,7 +477,7 @@ fn sphere_stage(
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
         let filter = Filter::Sphere { center: c, r2 };
-        filter_run(sc, a, b, filter, skip_own(s_idx, round));
+        filter_run(sc, a, b, filter, Owed { shape: s_idx, round });
         let found = std::mem::take(&mut sc.hit_index);
         for &i in &found {
             let f = a + i as usize;
@@ -522,7 +522,7 @@ fn general_stage(
             shape_from_world: t,
             extent,
         };
-        filter_run(sc, a, b, filter, skip_own(s_idx, round));
+        filter_run(sc, a, b, filter, Owed { shape: s_idx, round });
         sc.batch.extend_mapped(a, &sc.hit_index, &sc.q, t);
     }
     if sc.batch.is_empty() {
@@ -604,12 +604,28 @@ enum Filter<'a> {
     },
 }
 
-/// The shape whose own points a round skips: in rounds after the first, the points a shape
-/// moved in the previous round lie on its surface (projected there), so only the other shapes
-/// test them again. None (`u32::MAX`) in the first round.
-#[inline]
-fn skip_own(s_idx: u32, round: u8) -> u32 {
-    if round > 0 { s_idx } else { u32::MAX }
+/// Which earlier shapes still owe a point a test in a round after the first.
+///
+/// The shapes are visited in order and each sees the points the earlier ones moved
+/// (Gauss-Seidel). A point that shape `a` moved in round `r` was then tested at its final
+/// position by every shape after `a` in that round, and none of them moved it. So round `r + 1`
+/// owes it a test only by the shapes before `a`; a shape after `a` would test the same position
+/// with the same arithmetic and find the same answer. A point moved again in round `r + 1` is
+/// tested by every later shape of that round, as usual.
+#[derive(Clone, Copy)]
+struct Owed {
+    /// The shape running the test.
+    shape: u32,
+    /// The current round (0: every gated point is tested).
+    round: u8,
+}
+
+impl Owed {
+    /// Whether point `f` is tested by this shape in this round.
+    #[inline]
+    fn test(self, sc: &PassScratch, f: usize) -> bool {
+        self.round == 0 || sc.moved_round[f] == self.round || self.shape < sc.last_shape[f]
+    }
 }
 
 impl Filter<'_> {
@@ -637,10 +653,9 @@ impl Filter<'_> {
     }
 }
 
-/// Runs `filter` over the gated fat points of the run `[a, b)` (except those whose last move
-/// was by shape `skip`) and leaves the positions (in the run) of those that pass in
+/// Runs `filter` over the gated fat points of the run `[a, b)` that `owed` includes and leaves the positions (in the run) of those that pass in
 /// `sc.hit_index`.
-fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, skip: u32) {
+fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed: Owed) {
     let len = b - a;
     sc.hit.resize(len.next_multiple_of(8), 0);
     let gated = (sc.gate_prefix[b] - sc.gate_prefix[a]) as usize;
@@ -654,7 +669,7 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, skip
         for &i in &gated {
             let f = a + i as usize;
             let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
-            if filter.contains(q) && sc.last_shape[f] != skip {
+            if filter.contains(q) && owed.test(sc, f) {
                 sc.hit_index.push(i);
             }
         }
@@ -677,9 +692,10 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, skip
     }
     sc.hit[len..].fill(0);
     collect_hits(&sc.hit, &mut sc.hit_index);
-    if skip != u32::MAX {
-        let last = &sc.last_shape[a..b];
-        sc.hit_index.retain(|&i| last[i as usize] != skip);
+    if owed.round > 0 {
+        let mut hits = std::mem::take(&mut sc.hit_index);
+        hits.retain(|&i| owed.test(sc, a + i as usize));
+        sc.hit_index = hits;
     }
 }
 
