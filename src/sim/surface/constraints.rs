@@ -92,6 +92,8 @@ struct PassScratch {
     active_runs: Vec<(u32, u32)>,
     /// Original shape-space positions of `project`'s entries.
     origin: Vec<Vec3>,
+    /// All ones, per free point (the rebuild's filters test every point).
+    ones: Vec<u8>,
     /// Grid-row boxes (rebuild).
     row_lo: Vec<Vec3>,
     row_hi: Vec<Vec3>,
@@ -204,6 +206,7 @@ impl Broadphase {
         sc.moved_round.resize(free, u8::MAX);
         sc.last_shape.resize(free, 0);
         sc.last_normal.resize(free, Vec3::ZERO);
+        sc.ones.resize(free, 1);
         for c in &mut sc.q {
             c.resize(free, 0.0);
         }
@@ -245,26 +248,33 @@ impl Broadphase {
                 }
                 _ => None,
             };
-            let first = self.runs.len();
-            for r in 0..rows {
-                if sc.row_lo[r].cmpgt(hi).any() || sc.row_hi[r].cmplt(lo).any() {
-                    continue;
+            // The rows whose boxes meet the shape's world box, tested as one vectorised span (a
+            // row in between that misses the box has no point in it either). Points strictly
+            // inside the sphere's reach or in the box's reach are candidates.
+            let overlapping =
+                |r: &usize| !(sc.row_lo[*r].cmpgt(hi).any() || sc.row_hi[*r].cmplt(lo).any());
+            let span = (0..rows)
+                .find(overlapping)
+                .zip((0..rows).rev().find(overlapping));
+            if let Some((r0, r1)) = span {
+                let (a, b) = (r0 * m, (r1 + 1) * m);
+                let len = b - a;
+                sc.hit.resize(len.next_multiple_of(8), 0);
+                let (gx, gy, gz) = (
+                    &grid[0][m + a..m + b],
+                    &grid[1][m + a..m + b],
+                    &grid[2][m + a..m + b],
+                );
+                let (ones, hit) = (&sc.ones[a..b], &mut sc.hit[..len]);
+                match sphere_reach {
+                    Some(r) => sphere_filter(center, r * r, gx, gy, gz, ones, hit),
+                    None => box_filter(&s.shape_from_world, reach, gx, gy, gz, ones, hit),
                 }
-                for i in 0..m {
-                    let f = r * m + i;
-                    let k = m + f;
-                    let p = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
-                    let near = match sphere_reach {
-                        Some(reach_m) => (p - center).length_squared() <= reach_m * reach_m,
-                        None => {
-                            let local = s.shape_from_world.transform_point3(p).abs();
-                            local.cmple(reach).all()
-                        }
-                    };
-                    if !near {
-                        continue;
-                    }
-                    let f = f as u32;
+                sc.hit[len..].fill(0);
+                collect_hits(&sc.hit, &mut sc.hit_index);
+                let first = self.runs.len();
+                for &i in &sc.hit_index {
+                    let f = a as u32 + i;
                     let own = self.runs.len() > first;
                     match self.runs.last_mut() {
                         Some(last) if own && f <= last.1 + run_gap => last.1 = f + 1,
@@ -477,7 +487,16 @@ fn sphere_stage(
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
         let filter = Filter::Sphere { center: c, r2 };
-        filter_run(sc, a, b, filter, Owed { shape: s_idx, round });
+        filter_run(
+            sc,
+            a,
+            b,
+            filter,
+            Owed {
+                shape: s_idx,
+                round,
+            },
+        );
         let found = std::mem::take(&mut sc.hit_index);
         for &i in &found {
             let f = a + i as usize;
@@ -522,7 +541,16 @@ fn general_stage(
             shape_from_world: t,
             extent,
         };
-        filter_run(sc, a, b, filter, Owed { shape: s_idx, round });
+        filter_run(
+            sc,
+            a,
+            b,
+            filter,
+            Owed {
+                shape: s_idx,
+                round,
+            },
+        );
         sc.batch.extend_mapped(a, &sc.hit_index, &sc.q, t);
     }
     if sc.batch.is_empty() {
