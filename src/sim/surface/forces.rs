@@ -202,7 +202,8 @@ pub fn grid_normals(around: usize, along: usize, grid: &[Vec<f32>; 3], out: &mut
 
 /// Unit outward normals on the full grid like [`grid_normals`], but from differences over
 /// `stride` nodes each way (wrapping around, clamped along), SoA. With a stride of 1 it is
-/// [`grid_normals`].
+/// [`grid_normals`]. Every node gets exactly [`normal_node_strided`]'s value (the stride around
+/// first limited to `M/2`), computed in vector runs (see [`strided_normals_pass`]).
 pub fn grid_normals_strided(
     around: usize,
     along: usize,
@@ -220,16 +221,97 @@ pub fn grid_normals_strided(
     if m < 2 || along < 2 || grid.iter().any(|g| g.len() != m * along) {
         return;
     }
-    let stride = (si.min(m / 2).max(1), sj);
-    for j in 0..along {
-        for i in 0..m {
-            let n = normal_node_strided(m, along, grid, i, j, stride);
-            let k = j * m + i;
-            out[0][k] = n[0];
-            out[1][k] = n[1];
-            out[2][k] = n[2];
+    strided_normals_pass(m, along, si.min(m / 2).max(1), sj, grid, out);
+}
+
+/// The normals of the `len` nodes from `o` on: node `o + k` from the differences
+/// `g[a + k] − g[b + k]` (around) and `g[c + k] − g[d + k]` (along) with `[a, b, c, d] = src`,
+/// as [`unit_normal`] does for one node. The slices are cut to one length so the loop has no
+/// bounds checks and vectorizes.
+#[inline(always)]
+fn normals_run(
+    grid: &[Vec<f32>; 3],
+    out: &mut [Vec<f32>; 3],
+    o: usize,
+    len: usize,
+    src: [usize; 4],
+) {
+    #[inline(always)]
+    fn sl(v: &[Vec<f32>; 3], o: usize, len: usize) -> [&[f32]; 3] {
+        [&v[0][o..o + len], &v[1][o..o + len], &v[2][o..o + len]]
+    }
+    let (ip, im) = (sl(grid, src[0], len), sl(grid, src[1], len));
+    let (jp, jm) = (sl(grid, src[2], len), sl(grid, src[3], len));
+    let [ox, oy, oz] = out;
+    let (ox, oy, oz) = (
+        &mut ox[o..o + len],
+        &mut oy[o..o + len],
+        &mut oz[o..o + len],
+    );
+    for k in 0..len {
+        let n = unit_normal(
+            [
+                ip[0][k] - im[0][k],
+                ip[1][k] - im[1][k],
+                ip[2][k] - im[2][k],
+            ],
+            [
+                jp[0][k] - jm[0][k],
+                jp[1][k] - jm[1][k],
+                jp[2][k] - jm[2][k],
+            ],
+        );
+        ox[k] = n[0];
+        oy[k] = n[1];
+        oz[k] = n[2];
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// [`grid_normals_strided`]' work for strides `1 ≤ si ≤ M/2` around and `sj ≥ 1` along,
+    /// node by node the same operations as [`normal_node_strided`], in runs of consecutive
+    /// nodes ([`normals_run`]): the rows `sj ≤ j ≤ N−1−sj`, whose neighbours along are not
+    /// clamped, as one flat run (the nodes within `si` of a row's ends first take nodes of the
+    /// neighbouring rows around); each clamped end row's columns `si ≤ i < M−si`; then the `si`
+    /// columns at each end of every row, whose neighbours around wrap.
+    fn strided_normals_pass(
+        m: usize,
+        along: usize,
+        si: usize,
+        sj: usize,
+        grid: &[Vec<f32>; 3],
+        out: &mut [Vec<f32>; 3]
+    ) {
+        // Rows `first..end` have both neighbours `sj` rows away.
+        let (first, end) = (sj, along.saturating_sub(sj));
+        if end > first {
+            let (o, d) = (first * m, sj * m);
+            normals_run(grid, out, o, (end - first) * m, [o + si, o - si, o + d, o - d]);
+        }
+        let inner = m - 2 * si; // columns whose neighbours around do not wrap
+        for j in (0..first.min(along)).chain(end.max(first)..along) {
+            let (rp, rm) = ((j + sj).min(along - 1) * m, j.saturating_sub(sj) * m);
+            let o = j * m + si;
+            normals_run(grid, out, o, inner, [o + si, o - si, rp + si, rm + si]);
+        }
+        for j in 0..along {
+            let (rp, rm) = ((j + sj).min(along - 1) * m, j.saturating_sub(sj) * m);
+            let r = j * m;
+            // `i < si`: `i − si` wraps to `i + M − si`; `i ≥ M − si`: `i + si` to `i + si − M`.
+            normals_run(grid, out, r, si, [r + si, r + m - si, rp, rm]);
+            let e = m - si;
+            normals_run(grid, out, r + e, si, [r, r + e - si, rp + e, rm + e]);
         }
     }
+}
+
+/// [`unit_normal`] of the differences `g[a] − g[b]` (around) and `g[c] − g[d]` (along).
+#[inline(always)]
+fn normal_at(g: &[Vec<f32>; 3], a: usize, b: usize, c: usize, d: usize) -> [f32; 3] {
+    unit_normal(
+        [g[0][a] - g[0][b], g[1][a] - g[1][b], g[2][a] - g[2][b]],
+        [g[0][c] - g[0][d], g[1][c] - g[1][d], g[2][c] - g[2][d]],
+    )
 }
 
 /// The normal at node `(i, j)` from the grid, by the definition (wrap around, one-sided ends).
@@ -254,12 +336,7 @@ fn normal_node_strided(
     let jm = j.saturating_sub(sj);
     let ip = (i + si) % m;
     let im = (i + m - si) % m;
-    let (a, b) = (j * m + ip, j * m + im);
-    let (c, d) = (jp * m + i, jm * m + i);
-    unit_normal(
-        [g[0][a] - g[0][b], g[1][a] - g[1][b], g[2][a] - g[2][b]],
-        [g[0][c] - g[0][d], g[1][c] - g[1][d], g[2][c] - g[2][d]],
-    )
+    normal_at(g, j * m + ip, j * m + im, jp * m + i, jm * m + i)
 }
 
 /// `normalize(d2 × d1)`, or +Y when that is degenerate (tiny or not finite).
@@ -1362,6 +1439,103 @@ mod kernel_tests {
         grid_normals_strided(m, n, (1, 1), &grid, &mut a);
         grid_normals(m, n, &grid, &mut b);
         assert_eq!(a, b);
+    }
+
+    /// The strided normals as they were first written: node by node by the definition.
+    fn grid_normals_strided_reference(
+        m: usize,
+        along: usize,
+        stride: (usize, usize),
+        grid: &[Vec<f32>; 3],
+    ) -> [Vec<f32>; 3] {
+        let stride = (stride.0.max(1).min(m / 2).max(1), stride.1.max(1));
+        let mut out: [Vec<f32>; 3] = Default::default();
+        resize3(&mut out, m * along);
+        for j in 0..along {
+            for i in 0..m {
+                let n = normal_node_strided(m, along, grid, i, j, stride);
+                let k = j * m + i;
+                out[0][k] = n[0];
+                out[1][k] = n[1];
+                out[2][k] = n[2];
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn strided_normals_are_bit_identical_to_the_definition() {
+        let sizes = [
+            (40usize, 37usize),
+            (128, 128),
+            (33, 9),
+            (8, 9),
+            (7, 4),
+            (5, 3),
+            (3, 2),
+            (2, 5),
+            (9, 2),
+        ];
+        let strides = [
+            (1usize, 1usize),
+            (2, 2),
+            (4, 4),
+            (4, 2),
+            (2, 4),
+            (3, 5),
+            (1, 3),
+            (5, 1),
+        ];
+        let mut noise = Noise(29);
+        for (m, n) in sizes {
+            // A bumpy, twisted tube: no two normals alike, none along the axes.
+            let mut grid: [Vec<f32>; 3] = Default::default();
+            for j in 0..n {
+                for i in 0..m {
+                    let a = std::f32::consts::TAU * i as f32 / m as f32 + 0.1 * j as f32;
+                    let r = 0.1 + 0.01 * noise.next();
+                    let p =
+                        Vec3::new(r * a.cos(), 0.02 * j as f32, r * a.sin()) + 0.002 * noise.vec();
+                    grid[0].push(p.x);
+                    grid[1].push(p.y);
+                    grid[2].push(p.z);
+                }
+            }
+            // A collapsed neighbourhood (degenerate normals) mid-grid and a NaN.
+            let k = (n / 2) * m + m / 2;
+            for c in 0..3 {
+                for d in [
+                    k + 1,
+                    k + 2,
+                    k.saturating_sub(1),
+                    k + m,
+                    k.saturating_sub(m),
+                ] {
+                    grid[c][d.min(m * n - 1)] = grid[c][k];
+                }
+            }
+            grid[1][(n - 1) * m / 3] = f32::NAN;
+            for stride in strides {
+                let want = grid_normals_strided_reference(m, n, stride, &grid);
+                // Twice through the same output, which starts full of NaN: every node is written.
+                let mut got: [Vec<f32>; 3] = [0, 1, 2].map(|_| vec![f32::NAN; m * n]);
+                for _ in 0..2 {
+                    grid_normals_strided(m, n, stride, &grid, &mut got);
+                    for c in 0..3 {
+                        for (k, (g, w)) in got[c].iter().zip(&want[c]).enumerate() {
+                            assert_eq!(
+                                g.to_bits(),
+                                w.to_bits(),
+                                "{m}x{n} stride {stride:?}: node ({}, {}) component {c}: {g} vs {w}",
+                                k % m,
+                                k / m
+                            );
+                            assert!(g.is_finite());
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]
