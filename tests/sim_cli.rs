@@ -39,6 +39,7 @@ fn simulate_prints_the_documented_json() {
         "max_penetration_m",
         "nonfinite_events",
         "skin_points",
+        "pushed_points_per_step",
         "point_steps_per_second",
     ] {
         assert!(v[key].is_number(), "{key} missing in {v}");
@@ -50,6 +51,9 @@ fn simulate_prints_the_documented_json() {
     let min = v["step_secs"]["min"].as_f64().expect("number");
     let max = v["step_secs"]["max"].as_f64().expect("number");
     assert!(0.0 < min && min <= max, "{min} {max}");
+    // The arm's skin rests on its bones: some, never more than the free points, are pushed.
+    let pushed = v["pushed_points_per_step"].as_f64().expect("number");
+    assert!(0.0 < pushed && pushed <= 224.0, "{pushed}");
     let f = &v["phase_fraction"];
     let sum = ["force", "constraints", "other"]
         .iter()
@@ -67,7 +71,9 @@ fn simulate_table_and_resolution_and_every_integrator() {
     for integrator in ["euler", "rk2", "rk4"] {
         let text = simulate(&["penguin_16", "--seconds", "0.1", "--integrator", integrator]);
         assert!(
-            text.contains("Timestep interval (ms)") && text.contains("% Constraints"),
+            text.contains("Timestep interval (ms)")
+                && text.contains("% Constraints")
+                && text.contains("Points pushed out"),
             "{text}"
         );
         assert!(text.contains(integrator));

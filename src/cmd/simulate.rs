@@ -79,6 +79,8 @@ struct Report {
     phase_fraction: PhaseFraction,
     max_penetration_m: f32,
     final_max_depth_m: f32,
+    /// Mean skin points the constraint phase pushed out per accepted step.
+    pushed_points_per_step: f64,
     nonfinite_events: u64,
     point_steps_per_second: f64,
 }
@@ -247,6 +249,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         max_penetration_m: total.max_penetration_m,
         final_max_depth_m: model.max_depth_m(),
+        pushed_points_per_step: if total.steps > 0 {
+            total.pushed_points as f64 / total.steps as f64
+        } else {
+            0.0
+        },
         nonfinite_events: total.nonfinite_events,
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
     };
@@ -331,6 +338,11 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         "Max penetration",
         r.max_penetration_m * 1000.0,
         r.final_max_depth_m * 1000.0
+    )?;
+    writeln!(
+        out,
+        "{:<28}{:.0} of {} per step",
+        "Points pushed out", r.pushed_points_per_step, r.skin_points
     )?;
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
     writeln!(

@@ -163,6 +163,10 @@ pub struct AdvanceReport {
     /// Largest constraint correction applied on an accepted step, metres (how deep a point of
     /// the fat layer had got inside a muscle before it was pushed out).
     pub max_penetration_m: f32,
+    /// Skin points the constraint phase pushed out of a muscle, summed over the accepted steps
+    /// (a point counts once per step however many passes moved it). Divided by `steps`, the
+    /// points in contact per step: what the constraint phase's cost grows with.
+    pub pushed_points: u64,
     /// Non-finite states or energy explosions caught (the step was rejected and, if the state
     /// itself was bad, the last good state restored).
     pub nonfinite_events: u64,
@@ -184,6 +188,7 @@ impl Default for AdvanceReport {
             force_evals: 0,
             velocity_evals: 0,
             max_penetration_m: 0.0,
+            pushed_points: 0,
             nonfinite_events: 0,
             phases: PhaseTimes::default(),
         }
@@ -205,6 +210,7 @@ impl AdvanceReport {
         self.force_evals += later.force_evals;
         self.velocity_evals += later.velocity_evals;
         self.max_penetration_m = self.max_penetration_m.max(later.max_penetration_m);
+        self.pushed_points += later.pushed_points;
         self.nonfinite_events += later.nonfinite_events;
         self.phases.force += later.phases.force;
         self.phases.constraints += later.phases.constraints;

@@ -522,6 +522,7 @@ impl SurfaceModel {
             next_s: p.next_step_s,
             forced: p.forced || outcome.max_component_m > core.epsilon_c_m,
             correction_m: outcome.max_correction_m,
+            pushed: distinct_points(&w.candidate_contacts, core.free(), &mut w.flags),
         }
     }
 
@@ -551,6 +552,8 @@ enum Attempt {
         next_s: f64,
         forced: bool,
         correction_m: f32,
+        /// Distinct skin points the constraint phase moved.
+        pushed: u32,
     },
 }
 
@@ -845,6 +848,7 @@ impl DeformationModel for SurfaceModel {
                     next_s,
                     forced,
                     correction_m,
+                    pushed,
                 } => {
                     self.commit(h);
                     consecutive_failures = 0;
@@ -853,6 +857,7 @@ impl DeformationModel for SurfaceModel {
                     report.min_step_s = report.min_step_s.min(h);
                     report.max_step_s = report.max_step_s.max(h);
                     report.max_penetration_m = report.max_penetration_m.max(correction_m);
+                    report.pushed_points += u64::from(pushed);
                     // A step shortened to land on the target does not shrink the next one.
                     self.core.step_s = if h < planned {
                         planned.max(next_s)
@@ -1309,6 +1314,21 @@ fn fat_stride(core: &Core) -> (usize, usize) {
 /// The normals that offset the fat points of `grid` (the full grid of `core`'s skin).
 fn fat_normals(core: &Core, grid: &[Vec<f32>; 3], out: &mut [Vec<f32>; 3]) {
     forces::grid_normals_strided(core.around, core.along, fat_stride(core), grid, out);
+}
+
+/// Number of distinct free points among `contacts` (a point moved by several passes is listed
+/// once per pass); `seen` is scratch.
+fn distinct_points(contacts: &[Contact], free: usize, seen: &mut Vec<u8>) -> u32 {
+    seen.clear();
+    seen.resize(free, 0);
+    let mut count = 0;
+    for c in contacts {
+        if let Some(s) = seen.get_mut(c.point as usize) {
+            count += u32::from(*s == 0);
+            *s = 1;
+        }
+    }
+    count
 }
 
 /// Appends the points the last constraint pass moved, with their push directions.

@@ -454,3 +454,55 @@ fn a_fine_skins_fat_offset_does_not_follow_its_wrinkles() {
     assert!(m.max_depth_m() <= m.epsilon_c_m());
     assert!(all_finite(&m));
 }
+
+/// `pushed_points` counts each point the constraint phase moved once per accepted step (the
+/// passes list a point once each), and it follows the contacts: gravity presses the resting
+/// skin onto the muscles, and without gravity fewer points need pushing out.
+#[test]
+fn pushed_points_count_distinct_contacts_per_step() {
+    let distinct = |m: &SurfaceModel| {
+        let mut points: Vec<u32> = m.core.contacts.iter().map(|c| c.point).collect();
+        let listed = points.len();
+        points.sort_unstable();
+        points.dedup();
+        (points.len() as u64, listed as u64)
+    };
+    let per_step = |m: &mut SurfaceModel, poses: &mut FixedPosture| {
+        let (mut pushed, mut steps, mut repeats) = (0u64, 0u64, 0u64);
+        while steps < 40 {
+            let r = m.advance(m.time_s() + 1.0, poses, &mut MaxAttempts(1), None);
+            if r.steps == 1 {
+                let (points, listed) = distinct(m);
+                assert_eq!(r.pushed_points, points, "at t = {}", m.time_s());
+                repeats += listed - points;
+                pushed += r.pushed_points;
+                steps += 1;
+            } else {
+                assert_eq!(r.pushed_points, 0, "no accepted step, nothing pushed");
+            }
+        }
+        (pushed as f64 / steps as f64, repeats)
+    };
+    let (mut m, mut poses) = settled_at_rest("torso");
+    let free = m.core.free() as f64;
+    let (with_gravity, repeats) = per_step(&mut m, &mut poses);
+    assert!(
+        with_gravity > 0.25 * free,
+        "{with_gravity} of {free} points pushed per step at rest"
+    );
+    assert!(
+        repeats > 0,
+        "no point was moved by two passes: the dedupe went untested"
+    );
+    m.apply(&ParameterChange::Gravity(Vec3::ZERO))
+        .expect("gravity can change");
+    m.advance(m.time_s() + 1.0, &mut poses, &mut Unlimited, None);
+    let (without, _) = per_step(&mut m, &mut poses);
+    eprintln!(
+        "pushed per step: {with_gravity} with gravity ({repeats} repeats), {without} without, of {free}"
+    );
+    assert!(
+        without < 0.8 * with_gravity,
+        "without gravity {without} points per step, with {with_gravity}"
+    );
+}
