@@ -144,6 +144,16 @@ fn a_parameter_changed_in_the_panel_reaches_the_running_simulation() {
     assert!(h.state().pending_changes.is_empty());
     assert!(h.state().sim_error.is_none(), "{:?}", h.state().sim_error);
     assert_eq!(renderer.0, 3);
+    // The live Table 1 counts the points the constraint phase pushed out (the skin rests on
+    // the muscles) and shows the row.
+    let t1 = h.state().table1;
+    assert!(
+        t1.pushed_per_step().is_some_and(|p| p > 0.0),
+        "{:?}",
+        t1.totals
+    );
+    h.run();
+    assert!(h.query_by_label("Points pushed out / step").is_some());
 }
 
 #[test]
