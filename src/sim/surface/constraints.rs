@@ -377,13 +377,15 @@ pub fn enforce(
                 &active
             };
             if !runs.is_empty() {
+                let owed = Owed {
+                    shape: s_idx as u32,
+                    round: round as u8,
+                };
                 changed += match s.geometry.primitive {
                     Primitive::Sphere { radius_m } if s.geometry.is_undeformed() => {
-                        sphere_stage(sc, runs, s, s_idx as u32, radius_m, round as u8)
+                        sphere_stage(sc, runs, s, owed, radius_m)
                     }
-                    _ => {
-                        general_stage(sc, runs, s, s_idx as u32, broad.extents[s_idx], round as u8)
-                    }
+                    _ => general_stage(sc, runs, s, owed, broad.extents[s_idx]),
                 };
             }
             sc.active_runs = active;
@@ -458,9 +460,11 @@ pub fn enforce(
     out
 }
 
-/// Records that `f` was moved by `d` (world) by shape `s_idx` in `round`.
+/// Records that `f` was moved by `d` (world, along the unit `normal`) by `by`'s shape in its
+/// round.
 #[inline]
-fn record_move(sc: &mut PassScratch, f: usize, d: Vec3, normal: Vec3, s_idx: u32, round: u8) {
+fn record_move(sc: &mut PassScratch, f: usize, d: Vec3, normal: Vec3, by: Owed) {
+    let (s_idx, round) = (by.shape, by.round);
     sc.q[0][f] += d.x;
     sc.q[1][f] += d.y;
     sc.q[2][f] += d.z;
@@ -477,9 +481,8 @@ fn sphere_stage(
     sc: &mut PassScratch,
     runs: &[(u32, u32)],
     s: &ShapeInstance,
-    s_idx: u32,
+    owed: Owed,
     radius_m: f32,
-    round: u8,
 ) -> usize {
     let c = Vec3::from(s.world_from_shape.translation);
     let r2 = radius_m * radius_m;
@@ -487,16 +490,7 @@ fn sphere_stage(
     for &(a, b) in runs {
         let (a, b) = (a as usize, b as usize);
         let filter = Filter::Sphere { center: c, r2 };
-        filter_run(
-            sc,
-            a,
-            b,
-            filter,
-            Owed {
-                shape: s_idx,
-                round,
-            },
-        );
+        filter_run(sc, a, b, filter, owed);
         let found = std::mem::take(&mut sc.hit_index);
         for &i in &found {
             let f = a + i as usize;
@@ -515,7 +509,7 @@ fn sphere_stage(
             if !delta.is_finite() || delta.length_squared() <= SETTLED_M * SETTLED_M {
                 continue;
             }
-            record_move(sc, f, delta, dir, s_idx, round);
+            record_move(sc, f, delta, dir, owed);
             moved += 1;
         }
         sc.hit_index = found;
@@ -529,9 +523,8 @@ fn general_stage(
     sc: &mut PassScratch,
     runs: &[(u32, u32)],
     s: &ShapeInstance,
-    s_idx: u32,
+    owed: Owed,
     extent: Vec3,
-    round: u8,
 ) -> usize {
     let t = &s.shape_from_world;
     sc.batch.clear();
@@ -541,16 +534,7 @@ fn general_stage(
             shape_from_world: t,
             extent,
         };
-        filter_run(
-            sc,
-            a,
-            b,
-            filter,
-            Owed {
-                shape: s_idx,
-                round,
-            },
-        );
+        filter_run(sc, a, b, filter, owed);
         sc.batch.extend_mapped(a, &sc.hit_index, &sc.q, t);
     }
     if sc.batch.is_empty() {
@@ -612,7 +596,7 @@ fn general_stage(
             outward(geometry, s, on_surface)
         };
         let f = sc.project.point[i] as usize;
-        record_move(sc, f, d, normal, s_idx, round);
+        record_move(sc, f, d, normal, owed);
         moved += 1;
     }
     moved
@@ -632,17 +616,19 @@ enum Filter<'a> {
     },
 }
 
-/// Which earlier shapes still owe a point a test in a round after the first.
+/// One shape's turn in one round of a pass: the shape that tests (and moves) points, and which
+/// points it owes a test.
 ///
 /// The shapes are visited in order and each sees the points the earlier ones moved
 /// (Gauss-Seidel). A point that shape `a` moved in round `r` was then tested at its final
 /// position by every shape after `a` in that round, and none of them moved it. So round `r + 1`
 /// owes it a test only by the shapes before `a`; a shape after `a` would test the same position
 /// with the same arithmetic and find the same answer. A point moved again in round `r + 1` is
-/// tested by every later shape of that round, as usual.
+/// tested by every later shape of that round, as usual. In the first round every gated point
+/// is owed a test.
 #[derive(Clone, Copy)]
 struct Owed {
-    /// The shape running the test.
+    /// The shape running the test (index into the pass's shapes).
     shape: u32,
     /// The current round (0: every gated point is tested).
     round: u8,
