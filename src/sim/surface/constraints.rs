@@ -667,8 +667,8 @@ impl Filter<'_> {
     }
 }
 
-/// Runs `filter` over the gated fat points of the run `[a, b)` that `owed` includes and leaves the positions (in the run) of those that pass in
-/// `sc.hit_index`.
+/// Runs `filter` over the gated fat points of the run `[a, b)` that `owed` includes and leaves
+/// the positions (in the run) of those that pass in `sc.hit_index`.
 fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed: Owed) {
     let len = b - a;
     sc.hit.resize(len.next_multiple_of(8), 0);
