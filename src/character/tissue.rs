@@ -87,6 +87,26 @@ pub struct AttachParams {
     pub max_ray_m: f32,
 }
 
+/// Distance beyond a shape's bounding sphere at which a point is taken as surely outside the
+/// shape (guards the sphere test against rounding), metres.
+const BOUND_MARGIN_M: f32 = 0.001;
+
+/// The stretch `[enter, leave]` of the ray `origin + t·dir` (`dir` a unit vector) within
+/// [`BOUND_MARGIN_M`] of the shape's bounding sphere; the whole line when the ray only grazes
+/// it (no skipping then).
+fn bound_interval(inst: &super::shape::ShapeInstance, origin: Vec3, dir: Vec3) -> (f32, f32) {
+    let to_c = inst.bound_center_world_m - origin;
+    let along = to_c.dot(dir);
+    let reach = inst.bound_radius_m + BOUND_MARGIN_M;
+    let disc = along * along - (to_c.length_squared() - reach * reach);
+    if disc > 0.0 && disc.is_finite() {
+        let half = disc.sqrt();
+        (along - half, along + half)
+    } else {
+        (f32::NEG_INFINITY, f32::INFINITY)
+    }
+}
+
 /// Finds the anchor for one skin point: the first muscle surface hit along the inward normal
 /// (`-normal`) within `max_ray_m`, else the nearest surface point of any shape. Returns the
 /// shape, the anchor in that shape's rest space and the distance (metres). `None` only when
@@ -112,20 +132,36 @@ pub fn anchor_for_point(
             if !near_ray(inst) {
                 continue;
             }
-            // First t with F < 0 along the ray, refined by bisection.
-            let mut prev_t = 0.0;
             if inst.value_world(point_world) < 0.0 {
                 continue; // starts inside this shape: not a surface below the skin
             }
-            for s in 1..=steps {
+            // First t with F < 0 along the ray, refined by bisection. Samples further than
+            // BOUND_MARGIN_M outside the shape's bounding sphere are outside the shape, so the
+            // march starts at the last sample before the sphere and stops after it (the same
+            // samples and brackets as marching the whole ray, without the evaluations).
+            let (enter, leave) = bound_interval(inst, point_world, dir);
+            let first = if enter > 0.0 {
+                ((enter / STEP_M).floor() as u32).max(1)
+            } else {
+                1
+            };
+            let mut prev_t = if first > 1 {
+                ((first - 1) as f32 * STEP_M).min(max_ray_m)
+            } else {
+                0.0
+            };
+            for s in first..=steps {
                 let t = (s as f32 * STEP_M).min(max_ray_m);
-                if best.is_some_and(|(_, bt)| t > bt) {
+                if best.is_some_and(|(_, bt)| t > bt) || t > leave {
                     break;
                 }
                 if inst.value_world(point_world + dir * t) < 0.0 {
                     let (mut lo, mut hi) = (prev_t, t);
                     for _ in 0..30 {
                         let mid = 0.5 * (lo + hi);
+                        if mid <= lo || mid >= hi {
+                            break; // adjacent floats: the remaining halvings change nothing
+                        }
                         if inst.value_world(point_world + dir * mid) < 0.0 {
                             hi = mid;
                         } else {
