@@ -45,9 +45,30 @@
 /// Vector width (in `f32`) the reductions and chunked loops are written for (one AVX register).
 pub const LANES: usize = 8;
 
+#[cfg(test)]
+thread_local! {
+    /// Unit tests: run the baseline copies on this thread even on an AVX2 machine.
+    static FORCE_BASELINE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Unit tests: runs `f` with every [`multiversion!`](crate::sim::simd::multiversion) function
+/// on this thread taking its baseline (SSE2) copy, so both copies can be compared on one
+/// machine.
+#[cfg(test)]
+pub fn with_baseline_copies<R>(f: impl FnOnce() -> R) -> R {
+    FORCE_BASELINE.with(|b| b.set(true));
+    let out = f();
+    FORCE_BASELINE.with(|b| b.set(false));
+    out
+}
+
 /// Whether the CPU running this has AVX2 and FMA (std caches the answer, so this is cheap).
 #[inline]
 pub fn has_avx2_fma() -> bool {
+    #[cfg(test)]
+    if FORCE_BASELINE.with(|b| b.get()) {
+        return false;
+    }
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")

@@ -506,3 +506,49 @@ fn pushed_points_count_distinct_contacts_per_step() {
         "without gravity {without} points per step, with {with_gravity}"
     );
 }
+
+/// The AVX2 copies of the vectorised kernels (forces, Verlet passes, normals, constraint
+/// filters, superellipsoid values) and their baseline SSE2 copies do the same IEEE operations,
+/// so a simulation must come out bit for bit the same with either. On an AVX2 machine the
+/// baseline copies otherwise never run in the tests.
+#[test]
+fn baseline_and_avx2_copies_simulate_the_same_bits() {
+    let run = |name: &str, res: u32| {
+        let mut m = model(name, res, IntegratorKind::Verlet);
+        let motion = m.character().motions[0].clone();
+        let mut poses = MotionPoses(&motion);
+        let r = m.advance(0.4, &mut poses, &mut Unlimited, None);
+        let bits: Vec<u32> = m
+            .core
+            .x
+            .iter()
+            .chain(&m.core.v)
+            .map(|v| v.to_bits())
+            .collect();
+        (r.steps, r.rejected_steps, bits)
+    };
+    assert!(!crate::sim::simd::with_baseline_copies(
+        crate::sim::simd::has_avx2_fma
+    ));
+    if !crate::sim::simd::has_avx2_fma() {
+        eprintln!("no AVX2 here: both runs take the baseline copies");
+    }
+    // The 64×64 arm's fat normals take the strided pass (stride 2).
+    for (name, res) in [("torso", 16), ("wombat", 16), ("arm", 64)] {
+        let fast = run(name, res);
+        let baseline = crate::sim::simd::with_baseline_copies(|| run(name, res));
+        assert!(fast.0 > 20, "{name}: only {} steps", fast.0);
+        assert_eq!(
+            (fast.0, fast.1),
+            (baseline.0, baseline.1),
+            "{name}: steps differ"
+        );
+        let differing = fast
+            .2
+            .iter()
+            .zip(&baseline.2)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(differing, 0, "{name}: {differing} state values differ");
+    }
+}
