@@ -7,6 +7,13 @@ fn model(name: &str, res: u32, kind: IntegratorKind) -> SurfaceModel {
     SurfaceModel::new(c, kind).expect("example simulates")
 }
 
+/// An example (Verlet) and its first motion, for a `MotionPoses` to play.
+fn model_and_motion(name: &str, res: u32) -> (SurfaceModel, crate::character::Motion) {
+    let m = model(name, res, IntegratorKind::Verlet);
+    let motion = m.character().motions[0].clone();
+    (m, motion)
+}
+
 /// A 16×16 example held at its neutral posture for its first simulated second (Verlet), and
 /// the posture source that keeps holding it.
 fn settled_at_rest(name: &str) -> (SurfaceModel, FixedPosture) {
@@ -23,8 +30,7 @@ fn all_finite(m: &SurfaceModel) -> bool {
 #[test]
 fn no_fat_point_deeper_than_epsilon_c_after_any_accepted_step() {
     for name in ["arm", "penguin", "wombat"] {
-        let mut m = model(name, 16, IntegratorKind::Verlet);
-        let motion = m.character().motions[0].clone();
+        let (mut m, motion) = model_and_motion(name, 16);
         let mut poses = MotionPoses(&motion);
         let eps_c = m.epsilon_c_m();
         let mut steps = 0;
@@ -175,8 +181,7 @@ fn tissue_springs_only_pull() {
 
 #[test]
 fn guard_restores_the_last_good_state_after_an_injected_nan() {
-    let mut m = model("penguin", 16, IntegratorKind::Verlet);
-    let motion = m.character().motions[0].clone();
+    let (mut m, motion) = model_and_motion("penguin", 16);
     let mut poses = MotionPoses(&motion);
     m.advance(0.2, &mut poses, &mut Unlimited, None);
     let good = m.core.x.clone();
@@ -220,8 +225,7 @@ fn guard_rejects_exploding_steps() {
 
 #[test]
 fn snapshot_and_restore_continue_identically() {
-    let mut m = model("wombat", 16, IntegratorKind::Verlet);
-    let motion = m.character().motions[0].clone();
+    let (mut m, motion) = model_and_motion("wombat", 16);
     let mut poses = MotionPoses(&motion);
     m.advance(0.3, &mut poses, &mut Unlimited, None);
     let snap = m.snapshot();
@@ -239,8 +243,7 @@ fn snapshot_and_restore_continue_identically() {
 
 #[test]
 fn integrators_switch_at_run_time_and_all_follow_the_motion() {
-    let mut m = model("arm", 16, IntegratorKind::Verlet);
-    let motion = m.character().motions[0].clone();
+    let (mut m, motion) = model_and_motion("arm", 16);
     let mut poses = MotionPoses(&motion);
     let mut t = 0.0;
     for kind in [
@@ -323,8 +326,7 @@ fn bad_parameters_are_refused_and_change_nothing() {
 
 #[test]
 fn resolution_changes_keep_the_shape_and_keep_simulating() {
-    let mut m = model("torso", 16, IntegratorKind::Verlet);
-    let motion = m.character().motions[0].clone();
+    let (mut m, motion) = model_and_motion("torso", 16);
     let mut poses = MotionPoses(&motion);
     m.advance(0.1, &mut poses, &mut Unlimited, None);
     let before = m.positions_m();
@@ -350,8 +352,7 @@ impl Clock for TickingClock {
 
 #[test]
 fn phase_times_come_from_the_clock_passed_in() {
-    let mut m = model("penguin", 16, IntegratorKind::Verlet);
-    let motion = m.character().motions[0].clone();
+    let (mut m, motion) = model_and_motion("penguin", 16);
     let mut poses = MotionPoses(&motion);
     let r = m.advance(0.1, &mut poses, &mut Unlimited, None);
     assert_eq!(r.phases.total(), Duration::ZERO, "no clock, no timing");
@@ -391,8 +392,7 @@ fn skin_resting_on_its_muscles_takes_the_largest_steps() {
 
 #[test]
 fn contacts_of_an_uncommitted_candidate_do_not_leak() {
-    let mut a = model("penguin", 16, IntegratorKind::Verlet);
-    let motion = a.character().motions[0].clone();
+    let (mut a, motion) = model_and_motion("penguin", 16);
     let mut poses = MotionPoses(&motion);
     a.advance(0.3, &mut poses, &mut Unlimited, None);
     let mut b = a.clone();
@@ -514,8 +514,7 @@ fn pushed_points_count_distinct_contacts_per_step() {
 #[test]
 fn baseline_and_avx2_copies_simulate_the_same_bits() {
     let run = |name: &str, res: u32| {
-        let mut m = model(name, res, IntegratorKind::Verlet);
-        let motion = m.character().motions[0].clone();
+        let (mut m, motion) = model_and_motion(name, res);
         let mut poses = MotionPoses(&motion);
         let r = m.advance(0.4, &mut poses, &mut Unlimited, None);
         let bits: Vec<u32> = m
