@@ -91,20 +91,21 @@ pub struct AttachParams {
 /// shape (guards the sphere test against rounding), metres.
 const BOUND_MARGIN_M: f32 = 0.001;
 
-/// The stretch `[enter, leave]` of the ray `origin + t·dir` (`dir` a unit vector) within
-/// [`BOUND_MARGIN_M`] of the shape's bounding sphere; the whole line when the ray only grazes
-/// it (no skipping then).
-fn bound_interval(inst: &super::shape::ShapeInstance, origin: Vec3, dir: Vec3) -> (f32, f32) {
+/// The stretch `[enter, leave]` of the line `origin + t·dir` (`dir` a unit vector) within
+/// [`BOUND_MARGIN_M`] of the shape's bounding sphere; `None` when the line misses it.
+fn bound_interval(
+    inst: &super::shape::ShapeInstance,
+    origin: Vec3,
+    dir: Vec3,
+) -> Option<(f32, f32)> {
     let to_c = inst.bound_center_world_m - origin;
     let along = to_c.dot(dir);
     let reach = inst.bound_radius_m + BOUND_MARGIN_M;
     let disc = along * along - (to_c.length_squared() - reach * reach);
-    if disc > 0.0 && disc.is_finite() {
+    (disc >= 0.0).then(|| {
         let half = disc.sqrt();
         (along - half, along + half)
-    } else {
-        (f32::NEG_INFINITY, f32::INFINITY)
-    }
+    })
 }
 
 /// Finds the anchor for one skin point: the first muscle surface hit along the inward normal
@@ -119,27 +120,23 @@ pub fn anchor_for_point(
 ) -> Option<(ShapeId, Vec3, f32)> {
     const STEP_M: f32 = 0.002;
     let dir = -outward_normal.normalize_or_zero();
-    // Shapes whose bounding sphere meets the ray segment.
-    let near_ray = |inst: &super::shape::ShapeInstance| {
-        let to_c = inst.bound_center_world_m - point_world;
-        let t = to_c.dot(dir).clamp(0.0, max_ray_m);
-        (point_world + dir * t - inst.bound_center_world_m).length() <= inst.bound_radius_m
-    };
     if dir != Vec3::ZERO && max_ray_m > 0.0 {
         let steps = (max_ray_m / STEP_M).ceil() as u32;
         let mut best: Option<(usize, f32)> = None;
         for (k, inst) in instances.iter().enumerate() {
-            if !near_ray(inst) {
+            // Samples further than BOUND_MARGIN_M outside the shape's bounding sphere are
+            // outside the shape: a ray segment that misses the grown sphere cannot hit it, and
+            // the march starts at the last sample before the sphere and stops after it (the
+            // same samples and brackets as marching the whole ray, without the evaluations).
+            let Some((enter, leave)) = bound_interval(inst, point_world, dir)
+                .filter(|&(enter, leave)| leave >= 0.0 && enter <= max_ray_m)
+            else {
                 continue;
-            }
+            };
             if inst.value_world(point_world) < 0.0 {
                 continue; // starts inside this shape: not a surface below the skin
             }
-            // First t with F < 0 along the ray, refined by bisection. Samples further than
-            // BOUND_MARGIN_M outside the shape's bounding sphere are outside the shape, so the
-            // march starts at the last sample before the sphere and stops after it (the same
-            // samples and brackets as marching the whole ray, without the evaluations).
-            let (enter, leave) = bound_interval(inst, point_world, dir);
+            // First t with F < 0 along the ray, refined by bisection.
             let first = if enter > 0.0 {
                 ((enter / STEP_M).floor() as u32).max(1)
             } else {
