@@ -148,7 +148,7 @@ fn a_parameter_changed_in_the_panel_reaches_the_running_simulation() {
     // the muscles) and shows the row.
     let t1 = h.state().table1;
     assert!(
-        t1.pushed_per_step().is_some_and(|p| p > 0.0),
+        t1.totals.pushed_per_step().is_some_and(|p| p > 0.0),
         "{:?}",
         t1.totals
     );

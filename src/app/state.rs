@@ -153,10 +153,6 @@ impl Table1 {
         (self.totals.steps > 0)
             .then_some((self.totals.min_step_s * 1e3, self.totals.max_step_s * 1e3))
     }
-    /// Mean skin points the constraint phase pushed out of a muscle per accepted step.
-    pub fn pushed_per_step(&self) -> Option<f64> {
-        (self.totals.steps > 0).then(|| self.totals.pushed_points as f64 / self.totals.steps as f64)
-    }
     /// Percent of simulation time in force evaluation, constraints and other.
     pub fn percent(&self) -> (f64, f64, f64) {
         let (f, c, o) = self.totals.phases.fractions();

@@ -249,11 +249,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         max_penetration_m: total.max_penetration_m,
         final_max_depth_m: model.max_depth_m(),
-        pushed_points_per_step: if total.steps > 0 {
-            total.pushed_points as f64 / total.steps as f64
-        } else {
-            0.0
-        },
+        pushed_points_per_step: total.pushed_per_step().unwrap_or(0.0),
         nonfinite_events: total.nonfinite_events,
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
     };

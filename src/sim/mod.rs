@@ -196,6 +196,11 @@ impl Default for AdvanceReport {
 }
 
 impl AdvanceReport {
+    /// Mean skin points pushed out per accepted step (`None` before the first step).
+    pub fn pushed_per_step(&self) -> Option<f64> {
+        (self.steps > 0).then(|| self.pushed_points as f64 / self.steps as f64)
+    }
+
     /// Adds a later report into this one (counts summed, extremes combined, time and
     /// `reached_target` taken from `later`).
     pub fn merge(&mut self, later: &AdvanceReport) {

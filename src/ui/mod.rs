@@ -271,7 +271,8 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
 
 /// The live Table 1's "points pushed out per step" value (a dash before the first step).
 fn pushed_label(t1: &Table1) -> String {
-    t1.pushed_per_step()
+    t1.totals
+        .pushed_per_step()
         .map_or("–".into(), |p| format!("{p:.0}"))
 }
 
