@@ -6,7 +6,7 @@
 
 pub mod window;
 
-use crate::app::state::{AppState, CharacterParams, Table1};
+use crate::app::state::{AppState, CharacterParams};
 use crate::devices::hub::DeviceState;
 use crate::devices::profile::Role;
 use crate::sim::{IntegratorKind, ParameterChange};
@@ -261,19 +261,16 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         ));
         ui.end_row();
         ui.label("Points pushed out / step");
-        ui.label(pushed_label(&t1));
+        ui.label(
+            t1.totals
+                .pushed_per_step()
+                .map_or("–".into(), |p| format!("{p:.0}")),
+        );
         ui.end_row();
     });
     if ui.button("Reset figures").clicked() {
         state.table1 = Default::default();
     }
-}
-
-/// The live Table 1's "points pushed out per step" value (a dash before the first step).
-fn pushed_label(t1: &Table1) -> String {
-    t1.totals
-        .pushed_per_step()
-        .map_or("–".into(), |p| format!("{p:.0}"))
 }
 
 fn integrator_label(k: IntegratorKind) -> &'static str {
