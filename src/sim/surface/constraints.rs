@@ -713,18 +713,21 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
     }
 }
 
-/// Appends the indices of the non-zero bytes of `mask` (whose length is a multiple of 8) to
-/// `out`, skipping zero words of eight at a time.
+/// Appends the indices of the non-zero bytes of `mask` (whose length is a multiple of 8 and
+/// whose bytes are 0 or 1) to `out`, eight bytes at a time: a multiplication gathers a word's
+/// eight low bits into one byte, whose set bits are then taken lowest first.
 fn collect_hits(mask: &[u8], out: &mut Vec<u32>) {
+    /// Moves bit `8 i` of a word to bit `56 + i`.
+    const GATHER: u64 = 0x0102_0408_1020_4080;
     out.clear();
     for (w, chunk) in mask.chunks_exact(8).enumerate() {
-        let mut bits = u64::from_le_bytes([
+        let word = u64::from_le_bytes([
             chunk[0], chunk[1], chunk[2], chunk[3], chunk[4], chunk[5], chunk[6], chunk[7],
         ]);
+        let mut bits = (word & 0x0101_0101_0101_0101).wrapping_mul(GATHER) >> 56;
         while bits != 0 {
-            let byte = bits.trailing_zeros() / 8;
-            bits &= !(0xffu64 << (8 * byte));
-            out.push(8 * w as u32 + byte);
+            out.push(8 * w as u32 + bits.trailing_zeros());
+            bits &= bits - 1;
         }
     }
 }
@@ -1066,6 +1069,22 @@ mod tests {
                 .any(|s| s.value_world(points[f] - normals[f] * fat[f]) < 0.0);
             if !was_inside {
                 assert_eq!(scene.point(f), points[f], "point {f} was outside and moved");
+            }
+        }
+    }
+
+    #[test]
+    fn collect_hits_lists_exactly_the_set_bytes_in_order() {
+        let mut noise = Noise(3);
+        let mut out = Vec::new();
+        for len in [0usize, 8, 16, 64, 200] {
+            for density in [0.0f32, 0.1, 0.5, 1.0] {
+                let mask: Vec<u8> = (0..len)
+                    .map(|_| u8::from(noise.next().abs() < density))
+                    .collect();
+                collect_hits(&mask, &mut out);
+                let want: Vec<u32> = (0..len as u32).filter(|&i| mask[i as usize] == 1).collect();
+                assert_eq!(out, want, "length {len}, density {density}");
             }
         }
     }
