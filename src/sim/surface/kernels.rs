@@ -102,14 +102,6 @@ impl Batch {
         Vec3::new(self.grad[0][i], self.grad[1][i], self.grad[2][i])
     }
 
-    /// Sets entry `i`'s position.
-    #[inline]
-    pub fn set_position(&mut self, i: usize, p: Vec3) {
-        self.p[0][i] = p.x;
-        self.p[1][i] = p.y;
-        self.p[2][i] = p.z;
-    }
-
     /// Fills `value` (and `grad` when `want_gradient`) for every entry against `geometry`.
     /// Without the gradient, `value` only has the sign of `F` (negative inside, zero on the
     /// surface): it is the cheaper `F_raw − 1` without the normalisation, for the filter.
