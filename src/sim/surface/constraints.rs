@@ -462,7 +462,7 @@ pub fn enforce(
 
 /// Records that `f` was moved by `d` (world, along the unit `normal`) by `by`'s shape in its
 /// round.
-#[inline]
+#[inline(always)]
 fn record_move(sc: &mut PassScratch, f: usize, d: Vec3, normal: Vec3, by: Owed) {
     let (s_idx, round) = (by.shape, by.round);
     sc.q[0][f] += d.x;
