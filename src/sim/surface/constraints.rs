@@ -40,6 +40,10 @@ pub const MAX_ROUNDS: usize = 3;
 /// A point whose projection moves it by less than this is already on the surface (the
 /// projection tolerance), metres.
 const SETTLED_M: f32 = PROJECTION_TOLERANCE_M;
+/// Candidate runs closer than this many points (or one grid row, if shorter) are merged. On a
+/// 128×128 skin a whole row (the old gap) made the first stage test about 155k points per
+/// pass for 28k hits; 16 or 32 points cost 3.6 % fewer instructions in all, 64 points 2.6 %.
+const RUN_GAP: usize = 32;
 /// Batched Newton steps before the scalar projection takes over.
 const NEWTON_STEPS: usize = 2;
 
@@ -225,9 +229,9 @@ impl Broadphase {
             sc.row_hi.push(hi);
         }
         let grow = input.max_fat_m + self.margin_m;
-        // Runs separated by less than a row are merged: the first stage is a vectorised loop,
-        // so testing some extra points costs less than another run.
-        let run_gap = m as u32;
+        // Runs separated by less than a row (at most RUN_GAP points) are merged: the first
+        // stage is a vectorised loop, so testing some extra points costs less than another run.
+        let run_gap = m.min(RUN_GAP) as u32;
         self.runs.clear();
         self.run_offsets.clear();
         self.run_offsets.push(0);
