@@ -398,7 +398,25 @@ pub fn enforce(
             break;
         }
     }
-    // Positions and velocities of the moved points.
+    apply_moves(input, sc, grid, normals, x, v, touched)
+}
+
+/// Moves each skin point whose fat point the pass moved so that its fat point is where the
+/// pass left it (eq. 13a), and sets its velocity by eq. 13b-d relative to the surface of the
+/// shape that moved it last. Visits the free points in index order with every array sliced to
+/// the free points. The points moved by more than `input.recheck_m` go to `touched`.
+fn apply_moves(
+    input: &ConstraintInput<'_>,
+    sc: &PassScratch,
+    grid: &mut [Vec<f32>; 3],
+    normals: &[Vec<f32>; 3],
+    x: &mut [f32],
+    v: &mut [f32],
+    touched: &mut Vec<u32>,
+) -> ConstraintOutcome {
+    let shapes = input.shapes_end;
+    let m = input.around;
+    let free = m * (input.along - 2);
     let mut out = ConstraintOutcome::default();
     let inv_h = if input.h_s > 0.0 {
         1.0 / input.h_s
@@ -406,19 +424,38 @@ pub fn enforce(
         0.0
     };
     let same_shapes = input.shapes_start.len() == shapes.len();
-    for &f in &sc.moved {
-        let f = f as usize;
-        let k = m + f;
-        let p0 = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
-        let n = Vec3::new(normals[0][k], normals[1][k], normals[2][k]);
-        let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
-        let p1 = q + n * input.fat_m[f];
+    let [g0, g1, g2] = grid;
+    let (g0, g1, g2) = (
+        &mut g0[m..m + free],
+        &mut g1[m..m + free],
+        &mut g2[m..m + free],
+    );
+    let [n0, n1, n2] = normals;
+    let (n0, n1, n2) = (&n0[m..m + free], &n1[m..m + free], &n2[m..m + free]);
+    let (q0, q1, q2) = (&sc.q[0][..free], &sc.q[1][..free], &sc.q[2][..free]);
+    let (x0, rest) = x.split_at_mut(free);
+    let (x1, x2) = rest.split_at_mut(free);
+    let x2 = &mut x2[..free];
+    let (v0, rest) = v.split_at_mut(free);
+    let (v1, v2) = rest.split_at_mut(free);
+    let v2 = &mut v2[..free];
+    let fat = &input.fat_m[..free];
+    let (moved_round, last_shapes) = (&sc.moved_round[..free], &sc.last_shape[..free]);
+    let last_normal = &sc.last_normal[..free];
+    for f in 0..free {
+        if moved_round[f] == u8::MAX {
+            continue;
+        }
+        let p0 = Vec3::new(g0[f], g1[f], g2[f]);
+        let n = Vec3::new(n0[f], n1[f], n2[f]);
+        let q = Vec3::new(q0[f], q1[f], q2[f]);
+        let p1 = q + n * fat[f];
         let d = p1 - p0;
         let len = d.length();
         if len.is_nan() || len <= 0.0 {
             continue;
         }
-        let last_shape = sc.last_shape[f] as usize;
+        let last_shape = last_shapes[f] as usize;
         out.max_component_m = out.max_component_m.max(d.abs().max_element());
         if len > out.max_correction_m {
             out.max_correction_m = len;
@@ -428,25 +465,22 @@ pub fn enforce(
         if len > input.recheck_m {
             touched.push(f as u32);
         }
-        x[f] = p1.x;
-        x[free + f] = p1.y;
-        x[2 * free + f] = p1.z;
-        grid[0][k] = p1.x;
-        grid[1][k] = p1.y;
-        grid[2][k] = p1.z;
+        (x0[f], x1[f], x2[f]) = (p1.x, p1.y, p1.z);
+        (g0[f], g1[f], g2[f]) = (p1.x, p1.y, p1.z);
         // Velocity relative to the muscle surface, eq. 13b-d: the surface point now at q was
         // at start.world_from_shape(end.shape_from_world(q)) at the start of the step.
-        let surface_vel = if same_shapes {
-            let (start, end) = (&input.shapes_start[last_shape], &shapes[last_shape]);
-            let was = start
-                .world_from_shape
-                .transform_point3(end.shape_from_world.transform_point3(q));
-            (q - was) * inv_h
-        } else {
-            Vec3::ZERO
+        let surface_vel = match (same_shapes, input.shapes_start.get(last_shape)) {
+            (true, Some(start)) => {
+                let end = &shapes[last_shape];
+                let was = start
+                    .world_from_shape
+                    .transform_point3(end.shape_from_world.transform_point3(q));
+                (q - was) * inv_h
+            }
+            _ => Vec3::ZERO,
         };
-        let normal = sc.last_normal[f];
-        let vel = Vec3::new(v[f], v[free + f], v[2 * free + f]);
+        let normal = last_normal[f];
+        let vel = Vec3::new(v0[f], v1[f], v2[f]);
         let rel = vel - surface_vel;
         let vn = rel.dot(normal);
         let normal_part = normal * vn;
@@ -457,9 +491,7 @@ pub fn enforce(
             normal_part
         };
         let new_vel = surface_vel + new_normal + input.k_perpendicular * tangential;
-        v[f] = new_vel.x;
-        v[free + f] = new_vel.y;
-        v[2 * free + f] = new_vel.z;
+        (v0[f], v1[f], v2[f]) = (new_vel.x, new_vel.y, new_vel.z);
     }
     out
 }
