@@ -24,8 +24,10 @@
 //! - **Rounds.** Shapes are visited in order and each sees the points the earlier ones moved
 //!   (Gauss-Seidel); a point pushed out of one muscle into an overlapping one is caught by the
 //!   next round, which tests only the points the previous round moved, each against the
-//!   shapes other than the one that moved it (at most [`MAX_ROUNDS`]). Runs with few points to
-//!   test (later rounds, re-checks) are tested point by point instead of over the whole run.
+//!   shapes other than the one that moved it (at most [`MAX_ROUNDS`], as many as
+//!   [`ConstraintInput::rounds`] asks). The skin model's first pass of each step runs one round
+//!   and leaves such points to its re-check passes, which run every round. Runs with few points
+//!   to test (later rounds, re-checks) are tested point by point instead of over the whole run.
 
 #![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
 
@@ -156,6 +158,8 @@ pub struct ConstraintInput<'a> {
     pub max_speed_m_per_s: f32,
     /// Corrections longer than this mark a point's neighbourhood for a re-check, metres.
     pub recheck_m: f32,
+    /// Gauss-Seidel rounds over the shapes (at most [`MAX_ROUNDS`]).
+    pub rounds: usize,
 }
 
 /// Rotation angle between two frames' rotations, radians.
@@ -342,7 +346,7 @@ pub fn enforce(
     }
     sc.moved_round.fill(u8::MAX);
     sc.moved.clear();
-    for round in 0..MAX_ROUNDS {
+    for round in 0..input.rounds.min(MAX_ROUNDS) {
         if round > 0 {
             let previous = (round - 1) as u8;
             for (g, r) in sc.gate.iter_mut().zip(&sc.moved_round) {
@@ -983,6 +987,7 @@ mod tests {
                 k_perpendicular: 1.0,
                 max_speed_m_per_s: 0.0,
                 recheck_m: 1.0,
+                rounds: MAX_ROUNDS,
             };
             let mut broad = Broadphase {
                 margin_m: 0.02,

@@ -1194,9 +1194,17 @@ fn constrain_candidate(
         k_perpendicular: core.k_perpendicular,
         max_speed_m_per_s,
         recheck_m: 0.1 * core.epsilon_c_m,
+        rounds: constraints::MAX_ROUNDS,
     };
+    // The first pass makes one round over the shapes. A point that a later shape pushed into an
+    // earlier, overlapping one was outside that one before the push, so it is at most as deep
+    // as the push was long: pushes over `recheck_m` put it in `touched`, and the re-checks below
+    // (every shape, every round) fix it; shorter ones leave it less than `recheck_m` deep. The
+    // second and third rounds of the first pass moved about 14 points per simulated second on
+    // the torso while re-testing every moved point: 7 % of the run's instructions.
+    let first = ConstraintInput { rounds: 1, ..input };
     let mut outcome = constraints::enforce(
-        &input,
+        &first,
         &mut w.broad,
         &mut w.force.grid,
         &w.normals,
