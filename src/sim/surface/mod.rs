@@ -19,6 +19,7 @@
 
 #![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
 
+mod anchors;
 pub mod constraints;
 mod fastmath;
 pub mod forces;
@@ -39,6 +40,7 @@ use super::{
 };
 use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
 use crate::clock::Clock;
+use anchors::AnchorTable;
 use constraints::{Broadphase, ConstraintInput};
 use forces::{ForceInput, ForceScratch, Materials, Springs, StepKinematics};
 
@@ -64,6 +66,8 @@ struct Core {
     v: Vec<f32>,
     materials: Materials,
     springs: Springs,
+    /// The springs' anchors grouped by shape, for placing them each step.
+    anchor_table: AnchorTable,
     kind: IntegratorKind,
     tolerances: Tolerances,
     k_parallel: f32,
@@ -97,6 +101,8 @@ struct Work {
     checkpoint_step_s: f64,
     touched: Vec<u32>,
     recheck: Vec<u32>,
+    /// Scratch of [`AnchorTable::place`].
+    anchor_scratch: [Vec<f32>; 3],
     /// The candidate's positions before the constraint phase (SoA, free points).
     x_unconstrained: Vec<f32>,
     flags: Vec<u8>,
@@ -371,6 +377,7 @@ impl SurfaceModel {
             &mut w.shapes_end,
             &mut w.kin.rings_end,
             &mut w.kin.anchors_end,
+            &mut w.anchor_scratch,
         );
     }
 
@@ -388,6 +395,7 @@ impl SurfaceModel {
             &mut w.shapes_start,
             &mut w.kin.rings_start,
             &mut w.kin.anchors_start,
+            &mut w.anchor_scratch,
         );
         w.start_valid = true;
     }
@@ -569,6 +577,7 @@ fn kinematics_into(
     shapes: &mut Vec<ShapeInstance>,
     rings: &mut [Vec<f32>; 3],
     anchors: &mut [Vec<f32>; 3],
+    anchor_scratch: &mut [Vec<f32>; 3],
 ) {
     let ch = &core.character;
     poses.posture_at(t_s, posture);
@@ -588,19 +597,7 @@ fn kinematics_into(
             rings[c][m + i] = tv;
         }
     }
-    let s = &core.springs;
-    for a in anchors.iter_mut() {
-        a.resize(s.len(), 0.0);
-    }
-    for q in 0..s.len() {
-        let p = match shapes.get(s.shape[q] as usize) {
-            Some(inst) => inst.rest_point_to_world(s.anchor_rest_m[q]),
-            None => Vec3::ZERO,
-        };
-        anchors[0][q] = p.x;
-        anchors[1][q] = p.y;
-        anchors[2][q] = p.z;
-    }
+    core.anchor_table.place(shapes, anchors, anchor_scratch);
 }
 
 impl Core {
@@ -687,6 +684,7 @@ impl Core {
             v: vec![0.0; x.len()],
             x,
             materials,
+            anchor_table: AnchorTable::new(&springs, character.shapes.len()),
             springs,
             kind,
             tolerances,

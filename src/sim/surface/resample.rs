@@ -8,6 +8,7 @@
 
 use glam::Vec3;
 
+use super::anchors::AnchorTable;
 use super::{Core, forces, rest_curvature};
 
 /// Value of a full-grid field (`m` around, `n` along) at continuous grid coordinates `(s, t)`.
@@ -173,6 +174,8 @@ pub(super) fn resample(
             }
         }
     }
+    // The anchors are placed from a table grouped by shape: it must describe these springs.
+    out.anchor_table = AnchorTable::new(&ns, out.character.shapes.len());
     out.springs = ns;
     out
 }
