@@ -76,10 +76,17 @@ impl AnchorTable {
     ) {
         let n = self.len();
         for c in out.iter_mut() {
-            c.clear();
             c.resize(n, 0.0);
         }
         let groups = self.offsets.len().saturating_sub(2).min(shapes.len());
+        // Anchors on shapes that `shapes` does not have: the origin (every other entry of `out`
+        // is written below).
+        let placed = self.offsets.get(groups).map_or(0, |&o| o as usize);
+        for &q in &self.order[placed..] {
+            for c in out.iter_mut() {
+                c[q as usize] = 0.0;
+            }
+        }
         for (s, shape) in shapes.iter().enumerate().take(groups) {
             let (a, b) = (self.offsets[s] as usize, self.offsets[s + 1] as usize);
             if a == b {
@@ -224,5 +231,19 @@ mod tests {
             worst = worst.max((got - want).length());
         }
         assert!(worst < 1e-6, "anchors off by up to {worst} m");
+        // Placed again with the last shape missing, its anchors go to the origin (the earlier
+        // positions in `out` must not stay).
+        let last = shapes.len() - 1;
+        table.place(&shapes[..last], &mut out, &mut scratch);
+        let on_last: Vec<usize> = (0..springs.shape.len())
+            .filter(|&q| springs.shape[q] as usize == last)
+            .collect();
+        assert!(
+            !on_last.is_empty(),
+            "the torso's last shape carries anchors"
+        );
+        for q in on_last {
+            assert_eq!([out[0][q], out[1][q], out[2][q]], [0.0; 3], "spring {q}");
+        }
     }
 }
