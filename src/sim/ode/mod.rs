@@ -42,6 +42,24 @@ pub trait SecondOrderSystem {
     /// [`position_accel`](Self::position_accel) call.
     fn add_velocity_accel(&mut self, t_s: f64, x: &[f32], v: &[f32], a: &mut [f32]);
 
+    /// Writes `a = a_pos + M⁻¹ f_velocity(t, x, v)`, where `a_pos` holds the position part of
+    /// the last [`position_accel`](Self::position_accel) call (at the same `t` and `x`). The
+    /// result must be bit-identical to copying `a_pos` into `a` and calling
+    /// [`add_velocity_accel`](Self::add_velocity_accel), which is the default; a system may
+    /// override it to fuse the copy into its first pass (the Verlet iteration calls this once
+    /// per velocity evaluation).
+    fn velocity_accel_from(
+        &mut self,
+        t_s: f64,
+        x: &[f32],
+        v: &[f32],
+        a_pos: &[f32],
+        a: &mut [f32],
+    ) {
+        a.copy_from_slice(a_pos);
+        self.add_velocity_accel(t_s, x, v, a);
+    }
+
     /// Whether any force depends on velocity. When not, Verlet needs a single evaluation.
     fn has_velocity_forces(&self) -> bool {
         true
@@ -341,9 +359,9 @@ impl Integrator {
         let [x_half, a_pos, a, v_mid, inv_v_scale, _] = &mut self.scratch;
         let vel = sys.has_velocity_forces();
         let v_thr = tol.velocity_threshold_m_per_s as f32;
-        // (7a) r_{t+h/2} = r_t + h/2 v_t; (7b) v_{t+h} = v_t; (7c) of the first iteration
-        // v_{t+h/2} = v_t; and the eq. 8 velocity scales 1/max(|v_t|, v^thr), in one pass.
-        verlet_start(x, v, half, v_thr, x_half, v_new, v_mid, inv_v_scale);
+        // (7a) r_{t+h/2} = r_t + h/2 v_t. (7b) v_{t+h} = v_t and (7c) of the first iteration,
+        // v_{t+h/2} = v_t, are not copied: the first iteration reads v_t in their place.
+        verlet_start(x, v, half, x_half);
         let t_half = t_s + 0.5 * h64;
         sys.position_accel(t_half, x_half, a_pos);
         let eps_v = tol.velocity_tolerance as f32;
@@ -355,14 +373,19 @@ impl Integrator {
                 *vn = vi + h * ai;
             }
         } else {
-            a.copy_from_slice(a_pos);
             for it in 0..max_iter {
                 // (7d) a = M⁻¹ f(r_{t+h/2}, v_{t+h/2}); only the velocity part changes.
-                sys.add_velocity_accel(t_half, x_half, v_mid, a);
+                let v_half: &[f32] = if it == 0 { v } else { v_mid };
+                sys.velocity_accel_from(t_half, x_half, v_half, a_pos, a);
                 velocity_evals += 1;
                 // (7e-7g) v_old = v_{t+h}; v_{t+h} = v_t + h a; until scaled change ≤ ε_v;
-                // fused with the next iteration's (7c) and its reset of a to the position part.
-                let change = verlet_velocity_update(v, a_pos, inv_v_scale, h, a, v_new, v_mid);
+                // fused with the next iteration's (7c). The first iteration also takes the
+                // eq. 8 velocity scales 1/max(|v_t|, v^thr).
+                let change = if it == 0 {
+                    verlet_velocity_first(v, v_thr, h, a, v_new, v_mid, inv_v_scale)
+                } else {
+                    verlet_velocity_update(v, inv_v_scale, h, a, v_new, v_mid)
+                };
                 if it > 0 && change <= eps_v {
                     converged = true;
                     break;
@@ -570,74 +593,91 @@ pub fn integrate<S: SecondOrderSystem + ?Sized>(
 // `crate::sim::simd`), compiled for the baseline CPU and for AVX2.
 
 crate::sim::simd::multiversion! {
-    /// Verlet's first pass: `x_half = x + h/2 v`, `v_new = v_mid = v` and
-    /// `inv_v_scale = 1 / max(|v|, v_thr)` (the eq. 8 velocity scale as a reciprocal).
-    #[allow(clippy::too_many_arguments)]
-    fn verlet_start(
-        x: &[f32],
-        v: &[f32],
-        half: f32,
-        v_thr: f32,
-        x_half: &mut [f32],
-        v_new: &mut [f32],
-        v_mid: &mut [f32],
-        inv_v_scale: &mut [f32],
-    ) {
-        for (((x, v), (x_half, v_new)), (v_mid, inv_v_scale)) in x
-            .iter()
-            .zip(v)
-            .zip(x_half.iter_mut().zip(v_new.iter_mut()))
-            .zip(v_mid.iter_mut().zip(inv_v_scale.iter_mut()))
-        {
+    /// Verlet's first pass: `x_half = x + h/2 v`.
+    fn verlet_start(x: &[f32], v: &[f32], half: f32, x_half: &mut [f32]) {
+        for ((x, v), x_half) in x.iter().zip(v).zip(x_half.iter_mut()) {
             *x_half = x + half * v;
-            *v_new = *v;
-            *v_mid = *v;
-            *inv_v_scale = 1.0 / v.abs().max(v_thr);
         }
     }
 }
 
 crate::sim::simd::multiversion! {
-    /// One Verlet velocity iteration after the force evaluation (eq. 7e-7g, then 7c of the
-    /// next iteration): `v⁺ = v + h a`, returns `max |v⁺ − v_new| · inv_v_scale` (NaN or ∞
-    /// when any is), then `v_new = v⁺`, `v_mid = (v⁺ + v)/2` and `a = a_pos` (ready for the
-    /// next velocity evaluation).
-    #[allow(clippy::too_many_arguments)]
+    /// The first Verlet velocity iteration after the force evaluation (eq. 7e-7g with
+    /// `v_{t+h} = v` before it, then 7c of the next iteration): `v⁺ = v + h a`, the eq. 8
+    /// velocity scale `inv_v_scale = 1 / max(|v|, v_thr)`, returns `max |v⁺ − v| · inv_v_scale`
+    /// (NaN or ∞ when any is), then `v_new = v⁺` and `v_mid = (v⁺ + v)/2`.
+    fn verlet_velocity_first(
+        v: &[f32],
+        v_thr: f32,
+        h: f32,
+        a: &[f32],
+        v_new: &mut [f32],
+        v_mid: &mut [f32],
+        inv_v_scale: &mut [f32],
+    ) -> f32 {
+        use crate::sim::simd::{LANES, MaxLanes};
+        #[inline(always)]
+        fn one(v: f32, a: f32, v_thr: f32, h: f32, v_new: &mut f32, v_mid: &mut f32, s: &mut f32) -> f32 {
+            let scale = 1.0 / v.abs().max(v_thr);
+            let nv = v + h * a;
+            let d = (nv - v).abs() * scale;
+            *s = scale;
+            *v_new = nv;
+            *v_mid = 0.5 * (nv + v);
+            d
+        }
+        let mut acc = MaxLanes::new();
+        let (vc, vr) = v.as_chunks::<LANES>();
+        let (ac, ar) = a.as_chunks::<LANES>();
+        let (nc, nr) = v_new.as_chunks_mut::<LANES>();
+        let (mc, mr) = v_mid.as_chunks_mut::<LANES>();
+        let (sc, sr) = inv_v_scale.as_chunks_mut::<LANES>();
+        for ((((v, a), vn), vm), s) in vc.iter().zip(ac).zip(nc).zip(mc).zip(sc) {
+            for l in 0..LANES {
+                acc.push(l, one(v[l], a[l], v_thr, h, &mut vn[l], &mut vm[l], &mut s[l]));
+            }
+        }
+        for (l, ((((v, a), vn), vm), s)) in vr.iter().zip(ar).zip(nr).zip(mr).zip(sr).enumerate() {
+            acc.push(l, one(*v, *a, v_thr, h, vn, vm, s));
+        }
+        acc.finish()
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// One later Verlet velocity iteration after the force evaluation (eq. 7e-7g, then 7c of
+    /// the next iteration): `v⁺ = v + h a`, returns `max |v⁺ − v_new| · inv_v_scale` (NaN or ∞
+    /// when any is), then `v_new = v⁺` and `v_mid = (v⁺ + v)/2`.
     fn verlet_velocity_update(
         v: &[f32],
-        a_pos: &[f32],
         inv_v_scale: &[f32],
         h: f32,
-        a: &mut [f32],
+        a: &[f32],
         v_new: &mut [f32],
         v_mid: &mut [f32],
     ) -> f32 {
         use crate::sim::simd::{LANES, MaxLanes};
         #[inline(always)]
-        fn one(v: f32, a_pos: f32, scale: f32, h: f32, a: &mut f32, v_new: &mut f32, v_mid: &mut f32) -> f32 {
-            let nv = v + h * *a;
+        fn one(v: f32, scale: f32, h: f32, a: f32, v_new: &mut f32, v_mid: &mut f32) -> f32 {
+            let nv = v + h * a;
             let d = (nv - *v_new).abs() * scale;
             *v_new = nv;
             *v_mid = 0.5 * (nv + v);
-            *a = a_pos;
             d
         }
         let mut acc = MaxLanes::new();
         let (vc, vr) = v.as_chunks::<LANES>();
-        let (pc, pr) = a_pos.as_chunks::<LANES>();
         let (sc, sr) = inv_v_scale.as_chunks::<LANES>();
-        let (ac, ar) = a.as_chunks_mut::<LANES>();
+        let (ac, ar) = a.as_chunks::<LANES>();
         let (nc, nr) = v_new.as_chunks_mut::<LANES>();
         let (mc, mr) = v_mid.as_chunks_mut::<LANES>();
-        for (((((v, p), s), a), vn), vm) in vc.iter().zip(pc).zip(sc).zip(ac).zip(nc).zip(mc) {
+        for ((((v, s), a), vn), vm) in vc.iter().zip(sc).zip(ac).zip(nc).zip(mc) {
             for l in 0..LANES {
-                acc.push(l, one(v[l], p[l], s[l], h, &mut a[l], &mut vn[l], &mut vm[l]));
+                acc.push(l, one(v[l], s[l], h, a[l], &mut vn[l], &mut vm[l]));
             }
         }
-        for (l, (((((v, p), s), a), vn), vm)) in
-            vr.iter().zip(pr).zip(sr).zip(ar).zip(nr).zip(mr).enumerate()
-        {
-            acc.push(l, one(*v, *p, *s, h, a, vn, vm));
+        for (l, ((((v, s), a), vn), vm)) in vr.iter().zip(sr).zip(ar).zip(nr).zip(mr).enumerate() {
+            acc.push(l, one(*v, *s, h, *a, vn, vm));
         }
         acc.finish()
     }

@@ -864,6 +864,35 @@ pub fn add_velocity_accel(
         return; // not a state of this skin (a programming error; the model never calls so)
     }
     damping_accel(&mat.damping_per_mass, v, a);
+    tissue_velocity(input, scratch, v, a);
+}
+
+/// `a = a_pos + M⁻¹ f_velocity(t, x, v)`: [`add_velocity_accel`] on a copy of `a_pos` (the
+/// position part), with the copy fused into the damping pass; bit-identical to copying and
+/// adding.
+pub fn velocity_accel_from(
+    input: &ForceInput<'_>,
+    scratch: &ForceScratch,
+    v: &[f32],
+    a_pos: &[f32],
+    a: &mut [f32],
+) {
+    let mat = input.materials;
+    let free = v.len() / 3;
+    if a.len() != v.len() || a_pos.len() != v.len() || mat.damping_per_mass.len() != free {
+        if a.len() == a_pos.len() {
+            a.copy_from_slice(a_pos);
+        }
+        return; // not a state of this skin (a programming error; the model never calls so)
+    }
+    damping_accel_from(&mat.damping_per_mass, v, a_pos, a);
+    tissue_velocity(input, scratch, v, a);
+}
+
+/// The tissue damping term of [`add_velocity_accel`] (lengths already checked).
+fn tissue_velocity(input: &ForceInput<'_>, scratch: &ForceScratch, v: &[f32], a: &mut [f32]) {
+    let mat = input.materials;
+    let free = v.len() / 3;
     let s = input.springs;
     let ns = s.len();
     if ns == 0 || scratch.spring_pos.len() != ns || scratch.spring_inv_mass.len() != ns {
@@ -914,6 +943,22 @@ crate::sim::simd::multiversion! {
         for (ac, vc) in a.chunks_exact_mut(free).zip(v.chunks_exact(free)) {
             for ((ai, vi), d) in ac.iter_mut().zip(vc).zip(damping_per_mass) {
                 *ai -= d * vi;
+            }
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// `a = a_pos − (γ/m) v` on the three blocks.
+    fn damping_accel_from(damping_per_mass: &[f32], v: &[f32], a_pos: &[f32], a: &mut [f32]) {
+        let free = damping_per_mass.len();
+        for ((ac, vc), pc) in a
+            .chunks_exact_mut(free)
+            .zip(v.chunks_exact(free))
+            .zip(a_pos.chunks_exact(free))
+        {
+            for (((ai, vi), pi), d) in ac.iter_mut().zip(vc).zip(pc).zip(damping_per_mass) {
+                *ai = pi - d * vi;
             }
         }
     }
@@ -1333,7 +1378,16 @@ mod kernel_tests {
         for _ in 0..2 {
             let mut got = vec![f32::NAN; c.x.len()];
             position_accel(&input, &mut scratch, t, &c.x, &mut got);
+            // The fused copy (the Verlet iteration's path) gives the same bits as copy + add.
+            let mut fused = vec![f32::NAN; c.x.len()];
+            velocity_accel_from(&input, &scratch, &c.v, &got, &mut fused);
             add_velocity_accel(&input, &scratch, &c.v, &mut got);
+            let bits = |a: &[f32]| a.iter().map(|v| v.to_bits()).collect::<Vec<u32>>();
+            assert_eq!(
+                bits(&fused),
+                bits(&got),
+                "velocity_accel_from differs from the copy + add"
+            );
             let scale = want.iter().fold(0.0f32, |s, a| s.max(a.abs()));
             assert!(scale > 1.0, "a test with forces in it: {scale}");
             for (i, (g, w)) in got.iter().zip(&want).enumerate() {

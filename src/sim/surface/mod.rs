@@ -165,6 +165,18 @@ impl SecondOrderSystem for Eval<'_> {
         forces::add_velocity_accel(&self.input, self.scratch, v, a);
         self.add_time(start);
     }
+    fn velocity_accel_from(
+        &mut self,
+        _t_s: f64,
+        _x: &[f32],
+        v: &[f32],
+        a_pos: &[f32],
+        a: &mut [f32],
+    ) {
+        let start = self.now();
+        forces::velocity_accel_from(&self.input, self.scratch, v, a_pos, a);
+        self.add_time(start);
+    }
     /// For each point in contact after the last step, drops the error component along the
     /// contact normal when it points into the muscle: the step went further in than Euler's,
     /// and the constraint phase replaces that motion (checked against ε_c, section 4.2.3).
