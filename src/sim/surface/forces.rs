@@ -109,9 +109,12 @@ pub struct Materials {
 /// Scratch and cached values of the force evaluation.
 #[derive(Debug, Clone, Default)]
 pub struct ForceScratch {
-    /// Full-grid positions of the last position evaluation, SoA (callers of [`assemble_grid`],
-    /// e.g. the constraint phase, may reuse it as their grid buffer).
+    /// Full-grid positions, SoA: filled by the position evaluation only when the bending pass
+    /// needs them (callers of [`assemble_grid`], e.g. the constraint phase, may use it as their
+    /// grid buffer).
     pub grid: [Vec<f32>; 3],
+    /// Rows 0, 1, N−2 and N−1 of the last position evaluation ([`edge_rows`]).
+    edges: [Vec<f32>; 3],
     /// Stretch fluxes F₁, F₂ at the nodes of rows 0..N−2.
     flux1: [Vec<f32>; 3],
     flux2: [Vec<f32>; 3],
@@ -130,6 +133,9 @@ pub struct ForceScratch {
     spring_point: [Vec<f32>; 3],
     /// Per spring: the acceleration it subtracts from its point (scattered after the pass).
     spring_accel: [Vec<f32>; 3],
+    /// The springs' [`contiguous_run`] as found by the last position evaluation, with the
+    /// address and length of the springs' point list and the free point count it was found for.
+    spring_run: Option<(usize, usize, usize, Option<usize>)>,
 }
 
 /// Everything the forces need for one evaluation.
@@ -186,6 +192,37 @@ pub fn assemble_grid(
             g[total - m + i] = rs[m + i] + lambda * (re[m + i] - rs[m + i]);
         }
         g[m..m + free].copy_from_slice(&x[c * free..(c + 1) * free]);
+    }
+}
+
+/// The grid's two first and two last rows (SoA, `4M` points: row 0, row 1, row N−2, row N−1):
+/// the fixed rows interpolated at `lambda` with exactly [`assemble_grid`]'s operations, the
+/// free rows copied from `x`. Rows 1..N−2 are read from `x` itself, these carry the stencils
+/// that reach a fixed row.
+fn edge_rows(
+    m: usize,
+    x: &[f32],
+    rings_start: &[Vec<f32>; 3],
+    rings_end: &[Vec<f32>; 3],
+    lambda: f32,
+    out: &mut [Vec<f32>; 3],
+) {
+    resize3(out, 4 * m);
+    let free = x.len() / 3;
+    for c in 0..3 {
+        let (rs, re) = (&rings_start[c][..2 * m], &rings_end[c][..2 * m]);
+        let xc = &x[c * free..(c + 1) * free];
+        let o = &mut out[c];
+        let (bottom, rest) = o.split_at_mut(m);
+        let (free_rows, top) = rest.split_at_mut(2 * m);
+        for ((o, s), e) in bottom.iter_mut().zip(&rs[..m]).zip(&re[..m]) {
+            *o = s + lambda * (e - s);
+        }
+        for ((o, s), e) in top.iter_mut().zip(&rs[m..]).zip(&re[m..]) {
+            *o = s + lambda * (e - s);
+        }
+        free_rows[..m].copy_from_slice(&xc[..m]);
+        free_rows[m..].copy_from_slice(&xc[free - m..]);
     }
 }
 
@@ -416,23 +453,36 @@ pub fn position_accel(
     }
     let lambda = input.lambda(t_s);
     let kin = input.kin;
-    assemble_grid(
+    let mat = input.materials;
+    // The fixed rows at λ; the free rows are read from `x` itself (no grid is assembled
+    // unless the bending pass needs one).
+    edge_rows(
         m,
-        n,
         x,
         &kin.rings_start,
         &kin.rings_end,
         lambda,
-        &mut scratch.grid,
+        &mut scratch.edges,
     );
+    if mat.has_bending {
+        assemble_grid(
+            m,
+            n,
+            x,
+            &kin.rings_start,
+            &kin.rings_end,
+            lambda,
+            &mut scratch.grid,
+        );
+    }
     resize3(&mut scratch.flux1, m * (n - 1));
     resize3(&mut scratch.flux2, m * (n - 1));
-    let mat = input.materials;
     // Elastic stretch/shear, scaled by 1/m, plus gravity: writes every entry of `a`.
     stretch_accel(
         m,
         n,
-        &scratch.grid,
+        x,
+        &scratch.edges,
         &mat.eta,
         &mat.rest_metric,
         &mat.inv_mass,
@@ -486,49 +536,121 @@ fn flux_at(
     ]
 }
 
-/// Fluxes at grid node `k` with its neighbour around `k1` (and along `k + M`), stored at `k`.
+/// Fluxes at the `len` consecutive nodes from `o` (stored there) of a grid run `g` (each
+/// component at least `len + M` long): node `k` at `g[k]`, its neighbour around at `g[k + 1]`
+/// and along at `g[k + M]`, as [`flux_at`] does for one ([`flux_pass`]).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn flux_node(
-    g: &[Vec<f32>; 3],
+fn flux_run(
+    g: [&[f32]; 3],
+    m: usize,
     eta: &[Vec<f32>; 3],
     rest: &[Vec<f32>; 3],
-    m: usize,
-    k: usize,
-    k1: usize,
     inv_h: [f32; 2],
+    o: usize,
+    len: usize,
     f1: &mut [Vec<f32>; 3],
     f2: &mut [Vec<f32>; 3],
 ) {
     #[inline(always)]
-    fn at(v: &[Vec<f32>; 3], k: usize) -> [f32; 3] {
-        [v[0][k], v[1][k], v[2][k]]
+    fn sl(v: &[Vec<f32>; 3], o: usize, len: usize) -> [&[f32]; 3] {
+        [&v[0][o..o + len], &v[1][o..o + len], &v[2][o..o + len]]
     }
-    let f = flux_at(
-        at(g, k),
-        at(g, k1),
-        at(g, k + m),
-        at(eta, k),
-        at(rest, k),
+    let (e, r) = (sl(eta, o, len), sl(rest, o, len));
+    let [f1x, f1y, f1z] = f1;
+    let [f2x, f2y, f2z] = f2;
+    flux_pass(
+        &g[0][..len + m],
+        &g[1][..len + m],
+        &g[2][..len + m],
+        m,
+        e[0],
+        e[1],
+        e[2],
+        r[0],
+        r[1],
+        r[2],
         inv_h[0],
         inv_h[1],
+        &mut f1x[o..o + len],
+        &mut f1y[o..o + len],
+        &mut f1z[o..o + len],
+        &mut f2x[o..o + len],
+        &mut f2y[o..o + len],
+        &mut f2z[o..o + len],
     );
-    for c in 0..3 {
-        f1[c][k] = f[c];
-        f2[c][k] = f[3 + c];
+}
+
+crate::sim::simd::multiversion! {
+    /// [`flux_at`] over a run of nodes (the length `len` of `f1x`; `g` is `len + m` long): node
+    /// `k` at `g[k]`, its neighbours at `g[k + 1]` and `g[k + m]`. Each array is its own
+    /// argument, so the compiler knows the outputs alias nothing and vectorizes the loop without
+    /// run-time checks.
+    fn flux_pass(
+        gx: &[f32],
+        gy: &[f32],
+        gz: &[f32],
+        m: usize,
+        ex: &[f32],
+        ey: &[f32],
+        ez: &[f32],
+        rx: &[f32],
+        ry: &[f32],
+        rz: &[f32],
+        inv_h1: f32,
+        inv_h2: f32,
+        f1x: &mut [f32],
+        f1y: &mut [f32],
+        f1z: &mut [f32],
+        f2x: &mut [f32],
+        f2y: &mut [f32],
+        f2z: &mut [f32],
+    ) {
+        let len = f1x.len();
+        if gx.len() < len + m || gy.len() < len + m || gz.len() < len + m || m == 0 {
+            return;
+        }
+        let (px, py, pz) = (&gx[..len], &gy[..len], &gz[..len]);
+        let (p1x, p1y, p1z) = (&gx[1..len + 1], &gy[1..len + 1], &gz[1..len + 1]);
+        let (qx, qy, qz) = (&gx[m..m + len], &gy[m..m + len], &gz[m..m + len]);
+        let (ex, ey, ez) = (&ex[..len], &ey[..len], &ez[..len]);
+        let (rx, ry, rz) = (&rx[..len], &ry[..len], &rz[..len]);
+        let (f1y, f1z) = (&mut f1y[..len], &mut f1z[..len]);
+        let (f2x, f2y, f2z) = (&mut f2x[..len], &mut f2y[..len], &mut f2z[..len]);
+        for k in 0..len {
+            let f = flux_at(
+                [px[k], py[k], pz[k]],
+                [p1x[k], p1y[k], p1z[k]],
+                [qx[k], qy[k], qz[k]],
+                [ex[k], ey[k], ez[k]],
+                [rx[k], ry[k], rz[k]],
+                inv_h1,
+                inv_h2,
+            );
+            f1x[k] = f[0];
+            f1y[k] = f[1];
+            f1z[k] = f[2];
+            f2x[k] = f[3];
+            f2y[k] = f[4];
+            f2z[k] = f[5];
+        }
     }
 }
 
 crate::sim::simd::multiversion! {
     /// Stretch/shear accelerations plus gravity on every free point (module docs): fluxes at
-    /// the nodes of rows 0..N−2, then `a = h₁h₂ (D⁻₁F₁ + D⁻₂F₂)/m + g`. Both passes run over the
-    /// flattened grid as single long vector loops (a row's last node first takes the next
-    /// row's first as its neighbour around), then the wrapped column is recomputed.
+    /// the nodes of rows 0..N−2, then `a = h₁h₂ (D⁻₁F₁ + D⁻₂F₂)/m + g`. The grid is read in
+    /// place: rows 1..N−2 from the free state `x`, rows 0 and N−1 from `edges` (rows 0, 1, N−2
+    /// and N−1 of the evaluation, [`edge_rows`]). The fluxes run as three long vector loops
+    /// (row 0, rows 1..N−3, row N−2; a row's last node first takes the next row's first as its
+    /// neighbour around), then the wrapped column is recomputed; the accelerations as one loop
+    /// over the flattened free rows.
     #[allow(clippy::too_many_arguments)]
     fn stretch_accel(
         m: usize,
         n: usize,
-        grid: &[Vec<f32>; 3],
+        x: &[f32],
+        edges: &[Vec<f32>; 3],
         eta: &[Vec<f32>; 3],
         rest: &[Vec<f32>; 3],
         inv_mass: &[f32],
@@ -541,38 +663,56 @@ crate::sim::simd::multiversion! {
         let free = m * (n - 2);
         let inv_h = [m as f32, (n - 1) as f32];
         let (h1, h2) = (1.0 / inv_h[0], 1.0 / inv_h[1]);
-        {
-            #[inline(always)]
-            fn sl(v: &[Vec<f32>; 3], o: usize, len: usize) -> [&[f32]; 3] {
-                [&v[0][o..o + len], &v[1][o..o + len], &v[2][o..o + len]]
-            }
-            let (p, p1, q) = (sl(grid, 0, nodes), sl(grid, 1, nodes), sl(grid, m, nodes));
-            let (e, r) = (sl(eta, 0, nodes), sl(rest, 0, nodes));
-            let [f1x, f1y, f1z] = f1;
-            let [f2x, f2y, f2z] = f2;
-            let (f1x, f1y, f1z) = (&mut f1x[..nodes], &mut f1y[..nodes], &mut f1z[..nodes]);
-            let (f2x, f2y, f2z) = (&mut f2x[..nodes], &mut f2y[..nodes], &mut f2z[..nodes]);
-            for k in 0..nodes {
-                let f = flux_at(
-                    [p[0][k], p[1][k], p[2][k]],
-                    [p1[0][k], p1[1][k], p1[2][k]],
-                    [q[0][k], q[1][k], q[2][k]],
-                    [e[0][k], e[1][k], e[2][k]],
-                    [r[0][k], r[1][k], r[2][k]],
-                    inv_h[0],
-                    inv_h[1],
-                );
-                f1x[k] = f[0];
-                f1y[k] = f[1];
-                f1z[k] = f[2];
-                f2x[k] = f[3];
-                f2y[k] = f[4];
-                f2z[k] = f[5];
+        let xb = [&x[..free], &x[free..2 * free], &x[2 * free..3 * free]];
+        let eb = [&edges[0][..4 * m], &edges[1][..4 * m], &edges[2][..4 * m]];
+        #[inline(always)]
+        fn from(v: [&[f32]; 3], o: usize) -> [&[f32]; 3] {
+            [&v[0][o..], &v[1][o..], &v[2][o..]]
+        }
+        // Row 0 (nodes 0..M) on rows 0 and 1 of `edges`.
+        flux_run(eb, m, eta, rest, inv_h, 0, m, f1, f2);
+        // Rows 1..N−3 (nodes M..M(N−2)): all three in `x`.
+        let inner = m * (n - 3);
+        flux_run(xb, m, eta, rest, inv_h, m, inner, f1, f2);
+        // Row N−2 on rows N−2 and N−1 of `edges`.
+        flux_run(from(eb, 2 * m), m, eta, rest, inv_h, m + inner, m, f1, f2);
+        // The wrapped column: node (M−1, j) with its neighbour around (0, j) and along
+        // (M−1, j + 1); rows 0 and N−2 from `edges`, the rows between from `x`.
+        #[inline(always)]
+        #[allow(clippy::too_many_arguments)]
+        fn wrapped(
+            g: [&[f32]; 3],
+            i: usize,
+            i1: usize,
+            iq: usize,
+            k: usize,
+            eta: &[Vec<f32>; 3],
+            rest: &[Vec<f32>; 3],
+            inv_h: [f32; 2],
+            f1: &mut [Vec<f32>; 3],
+            f2: &mut [Vec<f32>; 3],
+        ) {
+            let f = flux_at(
+                [g[0][i], g[1][i], g[2][i]],
+                [g[0][i1], g[1][i1], g[2][i1]],
+                [g[0][iq], g[1][iq], g[2][iq]],
+                [eta[0][k], eta[1][k], eta[2][k]],
+                [rest[0][k], rest[1][k], rest[2][k]],
+                inv_h[0],
+                inv_h[1],
+            );
+            for c in 0..3 {
+                f1[c][k] = f[c];
+                f2[c][k] = f[3 + c];
             }
         }
-        for j in 0..n - 1 {
-            flux_node(grid, eta, rest, m, j * m + m - 1, j * m, inv_h, f1, f2);
+        wrapped(eb, m - 1, 0, 2 * m - 1, m - 1, eta, rest, inv_h, f1, f2);
+        for j in 1..n - 2 {
+            let r = (j - 1) * m;
+            wrapped(xb, r + m - 1, r, r + 2 * m - 1, j * m + m - 1, eta, rest, inv_h, f1, f2);
         }
+        let k = (n - 2) * m + m - 1;
+        wrapped(eb, 3 * m - 1, 2 * m, 4 * m - 1, k, eta, rest, inv_h, f1, f2);
         // force = h₁h₂ (D⁻₁F₁ + D⁻₂F₂) = h₂ (F₁[k] − F₁[k−e₁]) + h₁ (F₂[k] − F₂[k−M]), at grid
         // node k = f + M of free point f; column 0 takes F₁ of its row's last node after.
         let im = &inv_mass[..free];
@@ -711,6 +851,7 @@ fn tissue_position(
     };
     let inv_mass = &input.materials.inv_mass;
     let run = contiguous_run(&s.point, free);
+    scratch.spring_run = Some((s.point.as_ptr() as usize, ns, free, run));
     if run.is_none() {
         for (im, p) in scratch.spring_inv_mass.iter_mut().zip(&s.point) {
             *im = inv_mass[*p as usize];
@@ -899,7 +1040,13 @@ fn tissue_velocity(input: &ForceInput<'_>, scratch: &ForceScratch, v: &[f32], a:
         return;
     }
     let sc = scratch;
-    match contiguous_run(&s.point, free) {
+    // The run found by the last position evaluation (the same springs and state size), else
+    // looked for again.
+    let run = match sc.spring_run {
+        Some((ptr, n, f, run)) if ptr == s.point.as_ptr() as usize && n == ns && f == free => run,
+        _ => contiguous_run(&s.point, free),
+    };
+    match run {
         Some(o) => {
             let (ax, rest) = a.split_at_mut(free);
             let (ay, az) = rest.split_at_mut(free);
