@@ -27,6 +27,10 @@ pub struct AnchorTable {
     offsets: Vec<u32>,
     /// Each anchor in its shape's rest space (metres), in `order`'s order.
     rest: [Vec<f32>; 3],
+    /// `order` cut into runs of consecutive springs: `(first index into order, first spring,
+    /// length)`; shape `s`'s runs are `runs[run_offsets[s]..run_offsets[s + 1]]`.
+    runs: Vec<[u32; 3]>,
+    run_offsets: Vec<u32>,
 }
 
 impl AnchorTable {
@@ -53,10 +57,29 @@ impl AnchorTable {
             let p = springs.anchor_rest_m[q];
             (rest[0][i], rest[1][i], rest[2][i]) = (p.x, p.y, p.z);
         }
+        // Runs of consecutive springs within each shape's group (the springs follow the skin
+        // points, so a shape's anchors come in stretches of neighbouring points).
+        let mut runs: Vec<[u32; 3]> = Vec::new();
+        let mut run_offsets = vec![0u32; offsets.len()];
+        for s in 0..offsets.len() - 1 {
+            let (a, b) = (offsets[s] as usize, offsets[s + 1] as usize);
+            let mut i = a;
+            while i < b {
+                let mut j = i + 1;
+                while j < b && order[j] == order[j - 1] + 1 {
+                    j += 1;
+                }
+                runs.push([i as u32, order[i], (j - i) as u32]);
+                i = j;
+            }
+            run_offsets[s + 1] = runs.len() as u32;
+        }
         Self {
             order,
             offsets,
             rest,
+            runs,
+            run_offsets,
         }
     }
 
@@ -93,6 +116,25 @@ impl AnchorTable {
                 continue;
             }
             let len = b - a;
+            let runs = &self.runs[self.run_offsets[s] as usize..self.run_offsets[s + 1] as usize];
+            let [ox, oy, oz] = &mut *out;
+            let by_runs = runs.len() * RUN_MIN <= len;
+            if by_runs && shape.geometry.deformations().is_empty() {
+                // Undeformed: straight from the rest positions into place.
+                let [x, y, z] = &self.rest;
+                transform_runs(
+                    &shape.world_from_shape,
+                    &x[a..b],
+                    &y[a..b],
+                    &z[a..b],
+                    a,
+                    runs,
+                    ox,
+                    oy,
+                    oz,
+                );
+                continue;
+            }
             for (t, r) in scratch.iter_mut().zip(&self.rest) {
                 t.clear();
                 t.extend_from_slice(&r[a..b]);
@@ -110,15 +152,26 @@ impl AnchorTable {
                     }
                 }
             }
+            if by_runs {
+                transform_runs(&shape.world_from_shape, x, y, z, a, runs, ox, oy, oz);
+                continue;
+            }
+            // Short runs: transform in place as one vector loop, then scatter point by point.
             transform(&shape.world_from_shape, x, y, z);
-            let [ox, oy, oz] = out;
-            for (i, &q) in self.order[a..b].iter().enumerate() {
+            for (&q, ((x, y), z)) in self.order[a..b]
+                .iter()
+                .zip(x.iter().zip(y.iter()).zip(z.iter()))
+            {
                 let q = q as usize;
-                (ox[q], oy[q], oz[q]) = (x[i], y[i], z[i]);
+                (ox[q], oy[q], oz[q]) = (*x, *y, *z);
             }
         }
     }
 }
+
+/// Shapes whose anchors come in runs of at least this many consecutive springs on average are
+/// transformed run by run straight into place; others as one vector loop and then scattered.
+const RUN_MIN: usize = 8;
 
 // The deformations rest → deformed as `Resolved::apply`, in place over SoA points.
 
@@ -177,6 +230,38 @@ crate::sim::simd::multiversion! {
             x[i] = cx.x * px + cy.x * py + cz.x * pz + o.x;
             y[i] = cx.y * px + cy.y * py + cz.y * pz + o.y;
             z[i] = cx.z * px + cy.z * py + cz.z * pz + o.z;
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// `out[q] ← world_from_shape · p[i]` for the points `p = (x, y, z)` of one shape's group
+    /// (starting at index `base` of the table's order) over its `runs` of consecutive springs
+    /// `[i + base, q, len]`.
+    fn transform_runs(
+        world_from_shape: &Affine3A,
+        x: &[f32],
+        y: &[f32],
+        z: &[f32],
+        base: usize,
+        runs: &[[u32; 3]],
+        ox: &mut [f32],
+        oy: &mut [f32],
+        oz: &mut [f32],
+    ) {
+        let m = world_from_shape.matrix3;
+        let (cx, cy, cz) = (m.x_axis, m.y_axis, m.z_axis);
+        let o = world_from_shape.translation;
+        for run in runs {
+            let (i, q, n) = (run[0] as usize - base, run[1] as usize, run[2] as usize);
+            let (x, y, z) = (&x[i..i + n], &y[i..i + n], &z[i..i + n]);
+            let (ox, oy, oz) = (&mut ox[q..q + n], &mut oy[q..q + n], &mut oz[q..q + n]);
+            for k in 0..n {
+                let (px, py, pz) = (x[k], y[k], z[k]);
+                ox[k] = cx.x * px + cy.x * py + cz.x * pz + o.x;
+                oy[k] = cx.y * px + cy.y * py + cz.y * pz + o.y;
+                oz[k] = cx.z * px + cy.z * py + cz.z * pz + o.z;
+            }
         }
     }
 }
@@ -244,6 +329,48 @@ mod tests {
         );
         for q in on_last {
             assert_eq!([out[0][q], out[1][q], out[2][q]], [0.0; 3], "spring {q}");
+        }
+    }
+    #[test]
+    fn anchors_in_long_runs_go_straight_into_place() {
+        // Springs whose shapes come in runs of 25 consecutive springs (placed run by run), on
+        // every shape of the torso, deformed ones included, in a bent posture.
+        let character = examples::build("torso", 16, 16).expect("the torso example exists");
+        let shape_count = character.shapes.len();
+        let n = 40 * shape_count;
+        let springs = Springs {
+            shape: (0..n).map(|q| ((q / 25) % shape_count) as u32).collect(),
+            anchor_rest_m: (0..n)
+                .map(|q| {
+                    let t = q as f32 * 0.37;
+                    Vec3::new(
+                        0.03 * t.sin(),
+                        0.05 * (0.7 * t).cos(),
+                        0.02 * (1.3 * t).sin(),
+                    )
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let table = AnchorTable::new(&springs, shape_count);
+        assert!(table.runs.len() * RUN_MIN <= n, "{} runs", table.runs.len());
+        let motion = character.motions[0].clone();
+        let mut posture = Posture::neutral(&character.skeleton);
+        motion.posture_at_into(0.7, &mut posture);
+        let mut pose = SkeletonPose::default();
+        character
+            .skeleton
+            .forward_kinematics_into(&posture, &mut pose);
+        let mut shapes = Vec::new();
+        character.shape_instances_into(&posture, &pose, 0.7, &mut shapes);
+        assert!(shapes.iter().any(|s| !s.geometry.is_undeformed()));
+        let (mut out, mut scratch) = (Default::default(), Default::default());
+        table.place(&shapes, &mut out, &mut scratch);
+        let [ox, oy, oz]: &[Vec<f32>; 3] = &out;
+        for (q, (&s, &rest)) in springs.shape.iter().zip(&springs.anchor_rest_m).enumerate() {
+            let want = shapes[s as usize].rest_point_to_world(rest);
+            let got = Vec3::new(ox[q], oy[q], oz[q]);
+            assert!((got - want).length() < 1e-6, "spring {q}: {got} vs {want}");
         }
     }
 }
