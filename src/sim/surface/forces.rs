@@ -1026,8 +1026,61 @@ pub fn velocity_accel_from(
         }
         return; // not a state of this skin (a programming error; the model never calls so)
     }
-    damping_accel_from(&mat.damping_per_mass, v, a_pos, a);
-    tissue_velocity(input, scratch, v, a);
+    let s = input.springs;
+    let ns = s.len();
+    let run = if ns == 0 || scratch.spring_pos.len() != ns || scratch.spring_inv_mass.len() != ns {
+        None
+    } else {
+        spring_run(scratch, s, free)
+    };
+    let Some(o) = run else {
+        damping_accel_from(&mat.damping_per_mass, v, a_pos, a);
+        tissue_velocity(input, scratch, v, a);
+        return;
+    };
+    // One spring per point of `o..o + ns`: damping alone outside the run, damping and tissue
+    // in one pass over it (the same operations in the same order as the two passes).
+    let dpm = &mat.damping_per_mass;
+    for c in 0..3 {
+        let b = c * free;
+        for (lo, hi) in [(0, o), (o + ns, free)] {
+            if hi > lo {
+                damping_accel_from(
+                    &dpm[lo..hi],
+                    &v[b + lo..b + hi],
+                    &a_pos[b + lo..b + hi],
+                    &mut a[b + lo..b + hi],
+                );
+            }
+        }
+    }
+    let (ax, rest) = a.split_at_mut(free);
+    let (ay, az) = rest.split_at_mut(free);
+    let sc = scratch;
+    damped_tissue_velocity_pass(
+        block_slices(v, free, o, ns),
+        block_slices(a_pos, free, o, ns),
+        &dpm[o..o + ns],
+        &sc.anchor_vel,
+        &sc.spring_dir,
+        &sc.spring_pos,
+        &s.kd,
+        &mat.inv_mass[o..o + ns],
+        [&mut ax[o..o + ns], &mut ay[o..o + ns], &mut az[o..o + ns]],
+    );
+}
+
+/// The springs' [`contiguous_run`], from the last position evaluation when it was for these
+/// springs and this state size.
+fn spring_run(scratch: &ForceScratch, springs: &Springs, free: usize) -> Option<usize> {
+    match scratch.spring_run {
+        Some((ptr, n, f, run))
+            if ptr == springs.point.as_ptr() as usize && n == springs.len() && f == free =>
+        {
+            run
+        }
+        _ => contiguous_run(&springs.point, free),
+    }
 }
 
 /// The tissue damping term of [`add_velocity_accel`] (lengths already checked).
@@ -1040,13 +1093,7 @@ fn tissue_velocity(input: &ForceInput<'_>, scratch: &ForceScratch, v: &[f32], a:
         return;
     }
     let sc = scratch;
-    // The run found by the last position evaluation (the same springs and state size), else
-    // looked for again.
-    let run = match sc.spring_run {
-        Some((ptr, n, f, run)) if ptr == s.point.as_ptr() as usize && n == ns && f == free => run,
-        _ => contiguous_run(&s.point, free),
-    };
-    match run {
+    match spring_run(sc, s, free) {
         Some(o) => {
             let (ax, rest) = a.split_at_mut(free);
             let (ay, az) = rest.split_at_mut(free);
@@ -1107,6 +1154,50 @@ crate::sim::simd::multiversion! {
             for (((ai, vi), pi), d) in ac.iter_mut().zip(vc).zip(pc).zip(damping_per_mass) {
                 *ai = pi - d * vi;
             }
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// [`damping_accel_from`] and then [`tissue_velocity_pass`] on the points of a contiguous
+    /// run of springs (one per point), in one pass: `a = a_pos − (γ/m) v`, then
+    /// `a −= (total − pos)/m · d̂`.
+    #[allow(clippy::too_many_arguments)]
+    fn damped_tissue_velocity_pass(
+        point_v: [&[f32]; 3],
+        a_pos: [&[f32]; 3],
+        damping_per_mass: &[f32],
+        anchor_vel: &[Vec<f32>; 3],
+        dir: &[Vec<f32>; 3],
+        pos: &[f32],
+        kd: &[f32],
+        inv_mass: &[f32],
+        accel: [&mut [f32]; 3],
+    ) {
+        let ns = pos.len();
+        let (kd, inv_mass, dpm) = (&kd[..ns], &inv_mass[..ns], &damping_per_mass[..ns]);
+        let pv = [&point_v[0][..ns], &point_v[1][..ns], &point_v[2][..ns]];
+        let ap = [&a_pos[0][..ns], &a_pos[1][..ns], &a_pos[2][..ns]];
+        let av = [&anchor_vel[0][..ns], &anchor_vel[1][..ns], &anchor_vel[2][..ns]];
+        let d = [&dir[0][..ns], &dir[1][..ns], &dir[2][..ns]];
+        let [acx, acy, acz] = accel;
+        let (acx, acy, acz) = (&mut acx[..ns], &mut acy[..ns], &mut acz[..ns]);
+        for q in 0..ns {
+            let damped = [
+                ap[0][q] - dpm[q] * pv[0][q],
+                ap[1][q] - dpm[q] * pv[1][q],
+                ap[2][q] - dpm[q] * pv[2][q],
+            ];
+            let mut ldot_dir = 0.0;
+            for c in 0..3 {
+                ldot_dir += (pv[c][q] - av[c][q]) * d[c][q];
+            }
+            let p = pos[q];
+            let total = (p + kd[q] * ldot_dir).max(0.0);
+            let k = (total - p) * inv_mass[q];
+            acx[q] = damped[0] - k * d[0][q];
+            acy[q] = damped[1] - k * d[1][q];
+            acz[q] = damped[2] - k * d[2][q];
         }
     }
 }
