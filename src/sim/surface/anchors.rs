@@ -252,15 +252,52 @@ crate::sim::simd::multiversion! {
         let m = world_from_shape.matrix3;
         let (cx, cy, cz) = (m.x_axis, m.y_axis, m.z_axis);
         let o = world_from_shape.translation;
+        use crate::sim::simd::LANES;
+        #[inline(always)]
+        #[allow(clippy::too_many_arguments)]
+        fn one(
+            c: [glam::Vec3A; 4],
+            px: f32,
+            py: f32,
+            pz: f32,
+            ox: &mut f32,
+            oy: &mut f32,
+            oz: &mut f32,
+        ) {
+            let [cx, cy, cz, o] = c;
+            *ox = cx.x * px + cy.x * py + cz.x * pz + o.x;
+            *oy = cx.y * px + cy.y * py + cz.y * pz + o.y;
+            *oz = cx.z * px + cy.z * py + cz.z * pz + o.z;
+        }
+        let c = [cx, cy, cz, o];
         for run in runs {
             let (i, q, n) = (run[0] as usize - base, run[1] as usize, run[2] as usize);
             let (x, y, z) = (&x[i..i + n], &y[i..i + n], &z[i..i + n]);
             let (ox, oy, oz) = (&mut ox[q..q + n], &mut oy[q..q + n], &mut oz[q..q + n]);
-            for k in 0..n {
-                let (px, py, pz) = (x[k], y[k], z[k]);
-                ox[k] = cx.x * px + cy.x * py + cz.x * pz + o.x;
-                oy[k] = cx.y * px + cy.y * py + cz.y * pz + o.y;
-                oz[k] = cx.z * px + cy.z * py + cz.z * pz + o.z;
+            if n < LANES {
+                for k in 0..n {
+                    one(c, x[k], y[k], z[k], &mut ox[k], &mut oy[k], &mut oz[k]);
+                }
+                continue;
+            }
+            // Blocks of LANES points, the last one ending at the run's end (it may overlap the
+            // one before: those points are written twice with the same values).
+            let mut k0 = 0;
+            loop {
+                let k = k0.min(n - LANES);
+                let (bx, by, bz) = (&x[k..k + LANES], &y[k..k + LANES], &z[k..k + LANES]);
+                let (wx, wy, wz) = (
+                    &mut ox[k..k + LANES],
+                    &mut oy[k..k + LANES],
+                    &mut oz[k..k + LANES],
+                );
+                for l in 0..LANES {
+                    one(c, bx[l], by[l], bz[l], &mut wx[l], &mut wy[l], &mut wz[l]);
+                }
+                if k + LANES >= n {
+                    break;
+                }
+                k0 += LANES;
             }
         }
     }
@@ -333,13 +370,20 @@ mod tests {
     }
     #[test]
     fn anchors_in_long_runs_go_straight_into_place() {
-        // Springs whose shapes come in runs of 25 consecutive springs (placed run by run), on
-        // every shape of the torso, deformed ones included, in a bent posture.
+        // Springs whose shapes come in runs of 1 to 40 consecutive springs (placed run by run:
+        // short runs point by point, long ones in vector blocks, the last block overlapping),
+        // on every shape of the torso, deformed ones included, in a bent posture.
         let character = examples::build("torso", 16, 16).expect("the torso example exists");
         let shape_count = character.shapes.len();
-        let n = 40 * shape_count;
+        let lengths = [1usize, 3, 7, 8, 9, 15, 16, 17, 31, 40];
+        let mut shape = Vec::new();
+        for block in 0..4 * shape_count {
+            let len = lengths[block % lengths.len()];
+            shape.extend(std::iter::repeat_n((block % shape_count) as u32, len));
+        }
+        let n = shape.len();
         let springs = Springs {
-            shape: (0..n).map(|q| ((q / 25) % shape_count) as u32).collect(),
+            shape,
             anchor_rest_m: (0..n)
                 .map(|q| {
                     let t = q as f32 * 0.37;
