@@ -210,6 +210,17 @@ mod tube {
         fn add_velocity_accel(&mut self, _t_s: f64, _x: &[f32], v: &[f32], a: &mut [f32]) {
             forces::add_velocity_accel(&self.input, self.scratch, v, a);
         }
+        fn velocity_accel_from(
+            &mut self,
+            _t_s: f64,
+            _x: &[f32],
+            v: &[f32],
+            a_pos: &[f32],
+            a: &mut [f32],
+        ) {
+            // The model's own path (the copy of the position part fused into the damping pass).
+            forces::velocity_accel_from(&self.input, self.scratch, v, a_pos, a);
+        }
     }
 }
 
