@@ -60,8 +60,8 @@ impl Batch {
     }
 
     /// Appends the points `base + i` for each `i` in `hits`, read from the world SoA arrays `q`
-    /// and mapped by `shape_from_world` (filled by index: one resize per call, not four pushes
-    /// per point).
+    /// and mapped by `shape_from_world`: gathered by index (one resize per call, not four
+    /// pushes per point), then transformed in one vectorised pass.
     pub fn extend_mapped(
         &mut self,
         base: usize,
@@ -76,18 +76,19 @@ impl Batch {
             c.resize(end, 0.0);
         }
         let [px, py, pz] = &mut self.p;
+        let (px, py, pz) = (&mut px[start..], &mut py[start..], &mut pz[start..]);
+        let [qx, qy, qz] = q;
         let out = self.point[start..]
             .iter_mut()
-            .zip(&mut px[start..])
-            .zip(&mut py[start..])
-            .zip(&mut pz[start..]);
+            .zip(px.iter_mut())
+            .zip(py.iter_mut())
+            .zip(pz.iter_mut());
         for ((((point, x), y), z), &i) in out.zip(hits) {
             let f = base + i as usize;
-            let world = Vec3::new(q[0][f], q[1][f], q[2][f]);
-            let local = shape_from_world.transform_point3(world);
             *point = f as u32;
-            (*x, *y, *z) = (local.x, local.y, local.z);
+            (*x, *y, *z) = (qx[f], qy[f], qz[f]);
         }
+        transform_points(shape_from_world, px, py, pz);
     }
 
     /// Entry `i`'s shape-space position.
@@ -186,6 +187,22 @@ impl Batch {
         }
         if deformed && want_gradient {
             gradient_to_shape(&self.jac, gx, gy, gz);
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// `p ← t(p)` for every point (SoA), with the arithmetic of `Affine3A::transform_point3`.
+    fn transform_points(t: &glam::Affine3A, x: &mut [f32], y: &mut [f32], z: &mut [f32]) {
+        let n = x.len().min(y.len()).min(z.len());
+        let (x, y, z) = (&mut x[..n], &mut y[..n], &mut z[..n]);
+        let m = t.matrix3;
+        let (cx, cy, cz, o) = (m.x_axis, m.y_axis, m.z_axis, t.translation);
+        for i in 0..n {
+            let (a, b, c) = (x[i], y[i], z[i]);
+            x[i] = cx.x * a + cy.x * b + cz.x * c + o.x;
+            y[i] = cx.y * a + cy.y * b + cz.y * c + o.y;
+            z[i] = cx.z * a + cy.z * b + cz.z * c + o.z;
         }
     }
 }
