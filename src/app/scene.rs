@@ -15,6 +15,7 @@ use crate::render::scene::{
     FloorGrid, Layers, Rgba, Scene, Segment, ShapeInstance as RenderShape, ShapeKind,
     SkeletonLines, SkinSurface, ToolCursor, Wand,
 };
+use crate::render::subdivide;
 use glam::{Mat4, Vec3};
 use std::sync::Arc;
 
@@ -99,13 +100,18 @@ pub fn build_scene(inputs: &SceneInputs<'_>) -> Scene {
         && around >= 3
         && along >= 2)
         .then(|| {
-            let positions = inputs
+            let positions: Vec<Vec3> = inputs
                 .skin_positions_world
                 .iter()
                 .map(|&p| to_physical(p))
                 .collect();
+            // Drawn as a smooth surface through the simulated points, so coarse skins do not
+            // cut chords through the muscles under them (render::subdivide).
+            let level = subdivide::display_level(around);
+            let (rm, rn) = subdivide::refined_size(around, along, level);
+            let refined = subdivide::refine_skin_grid(&positions, around, along, level);
             SkinSurface {
-                mesh: TriMesh::from_triangles(positions, skin_indices(around, along)),
+                mesh: TriMesh::from_triangles(refined, skin_indices(rm, rn)),
                 color: Rgba::SKIN.with_alpha(inputs.skin_opacity.clamp(0.05, 1.0)),
             }
         });

@@ -857,6 +857,12 @@ mod tests {
         let record = state.run_frame(&clock, &mut renderer);
         assert!(record.sim_steps > 0);
         let (scene, _) = renderer.0.last().expect("rendered");
-        assert_eq!(scene.skin.as_ref().expect("skin").mesh.positions.len(), 64);
+        // The display draws the 8×8 grid refined (render::subdivide).
+        let level = crate::render::subdivide::display_level(8);
+        let (rm, rn) = crate::render::subdivide::refined_size(8, 8, level);
+        assert_eq!(
+            scene.skin.as_ref().expect("skin").mesh.positions.len(),
+            (rm * rn) as usize
+        );
     }
 }

@@ -15,6 +15,7 @@ pub mod mesh;
 pub mod reference;
 pub mod renderer;
 pub mod scene;
+pub mod subdivide;
 
 pub use capture::RgbaImage;
 pub use device_caps::{AdapterPreference, DeviceError, GpuContext};
