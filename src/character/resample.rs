@@ -6,13 +6,13 @@
 //! are interpolated and then scaled by `M·N / (M'·N')`, so the total mass and the accelerations
 //! they cause stay the same at any resolution. A new point that coincides with an old grid point
 //! keeps that point's spring unchanged (apart from that scaling); other points are attached
-//! anew ([`super::tissue::anchor_for_point`]) with interpolated spring parameters, and get a
+//! anew ([`super::tissue::anchors_for_points`]) with interpolated spring parameters, and get a
 //! spring only where the interpolated "has a spring" weight is at least one half.
 
 use glam::Vec3;
 
 use super::skin::{Skin, Sym2};
-use super::tissue::{TissueSpring, anchor_for_point};
+use super::tissue::{TissueSpring, anchors_for_points};
 use super::{Character, Posture, ValidationError};
 
 /// Where a new grid coordinate falls on the old grid: lower index, upper index, weight of upper.
@@ -185,6 +185,26 @@ impl Character {
         resampled
             .skin
             .outward_normals(&resampled.skin.positions_m, &mut normals);
+        // The points that need a new anchor (not coinciding with an old point, and with a
+        // spring nearby to interpolate from), searched all at once.
+        let mut search = Vec::new();
+        let mut searched = Vec::new();
+        for (jn, b) in lj.iter().enumerate() {
+            for (im, a) in li.iter().enumerate() {
+                let k = resampled.skin.index(im as u32, jn as u32);
+                if (a.exact.is_none() || b.exact.is_none()) && has[k] >= 0.5 {
+                    search.push((resampled.skin.positions_m[k], normals[k]));
+                    searched.push(k);
+                }
+            }
+        }
+        let mut new_anchor = vec![None; resampled.skin.point_count()];
+        for (k, found) in searched
+            .into_iter()
+            .zip(anchors_for_points(&instances, &search, 0.3))
+        {
+            new_anchor[k] = found;
+        }
         let mut tissue = Vec::new();
         for (jn, b) in lj.iter().enumerate() {
             for (im, a) in li.iter().enumerate() {
@@ -200,11 +220,7 @@ impl Character {
                     }
                     continue;
                 }
-                if has[k] < 0.5 {
-                    continue;
-                }
-                let p = resampled.skin.positions_m[k];
-                if let Some((shape, anchor, _)) = anchor_for_point(&instances, p, normals[k], 0.3) {
+                if let Some((shape, anchor, _)) = new_anchor[k] {
                     tissue.push(TissueSpring {
                         skin_point: k as u32,
                         shape,

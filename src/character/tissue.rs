@@ -108,6 +108,44 @@ fn bound_interval(
     })
 }
 
+/// [`anchor_for_point`] for many skin points (`(position, outward normal)` pairs, world
+/// frame), with the same results in the same order, split over the machine's cores (each
+/// point's search is independent; a 128×128 skin has about 15 000 points to search).
+pub fn anchors_for_points(
+    instances: &[super::shape::ShapeInstance],
+    points: &[(Vec3, Vec3)],
+    max_ray_m: f32,
+) -> Vec<Option<(ShapeId, Vec3, f32)>> {
+    /// Fewer points than this per thread are not worth a thread.
+    const MIN_PER_THREAD: usize = 256;
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(points.len() / MIN_PER_THREAD)
+        .max(1);
+    let search = |chunk: &[(Vec3, Vec3)]| -> Vec<Option<(ShapeId, Vec3, f32)>> {
+        chunk
+            .iter()
+            .map(|&(p, n)| anchor_for_point(instances, p, n, max_ray_m))
+            .collect()
+    };
+    if threads == 1 {
+        return search(points);
+    }
+    let per_thread = points.len().div_ceil(threads);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = points
+            .chunks(per_thread)
+            .map(|chunk| (chunk, scope.spawn(move || search(chunk))))
+            .collect();
+        handles
+            .into_iter()
+            // A thread that could not finish (it cannot panic short of running out of memory)
+            // has its points searched again here.
+            .flat_map(|(chunk, handle)| handle.join().unwrap_or_else(|_| search(chunk)))
+            .collect()
+    })
+}
+
 /// Finds the anchor for one skin point: the first muscle surface hit along the inward normal
 /// (`-normal`) within `max_ray_m`, else the nearest surface point of any shape. Returns the
 /// shape, the anchor in that shape's rest space and the distance (metres). `None` only when
@@ -214,10 +252,10 @@ pub fn attach_global(character: &super::Character, params: &AttachParams) -> Vec
     let skin = &character.skin;
     skin.outward_normals(&skin.positions_m, &mut normals);
     let mut springs = Vec::with_capacity(skin.point_count());
-    for (k, (p, n)) in skin.positions_m.iter().zip(&normals).enumerate() {
-        if let Some((shape, anchor, distance)) =
-            anchor_for_point(&instances, *p, *n, params.max_ray_m)
-        {
+    let points: Vec<(Vec3, Vec3)> = skin.positions_m.iter().copied().zip(normals).collect();
+    let found = anchors_for_points(&instances, &points, params.max_ray_m);
+    for (k, found) in found.into_iter().enumerate() {
+        if let Some((shape, anchor, distance)) = found {
             springs.push(TissueSpring {
                 skin_point: k as u32,
                 shape,
@@ -281,5 +319,24 @@ mod attach_tests {
             );
             assert_eq!(springs[0].stiffness_n_per_m, 3.0);
         }
+    }
+
+    #[test]
+    fn many_points_at_once_give_the_one_by_one_anchors_in_order() {
+        // 32×32 = 1024 points: enough for every core of a 4-core machine to take a share.
+        let c = build("torso", 32, 32).expect("example");
+        let posture = Posture::neutral(&c.skeleton);
+        let pose = c.skeleton.forward_kinematics(&posture);
+        let mut instances = Vec::new();
+        c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
+        let mut normals = Vec::new();
+        c.skin.outward_normals(&c.skin.positions_m, &mut normals);
+        let points: Vec<(Vec3, Vec3)> = c.skin.positions_m.iter().copied().zip(normals).collect();
+        let batch = anchors_for_points(&instances, &points, 0.3);
+        assert_eq!(batch.len(), points.len());
+        for (k, (&(p, n), got)) in points.iter().zip(&batch).enumerate() {
+            assert_eq!(*got, anchor_for_point(&instances, p, n, 0.3), "point {k}");
+        }
+        assert!(anchors_for_points(&instances, &[], 0.3).is_empty());
     }
 }
