@@ -1235,17 +1235,12 @@ mod file_tests {
     fn skins_start_outside_the_muscles_by_their_fat() {
         for name in NAMES {
             let c = build(name, 32, 32).expect("known example");
-            let posture = Posture::neutral(&c.skeleton);
-            let pose = c.skeleton.forward_kinematics(&posture);
-            let mut instances = Vec::new();
-            c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
-            let mut normals = Vec::new();
-            c.skin.outward_normals(&c.skin.positions_m, &mut normals);
-            for (k, p) in c.skin.positions_m.iter().enumerate() {
+            let (instances, points) = c.neutral_layout();
+            for (k, &(p, normal)) in points.iter().enumerate() {
                 if c.skin.is_fixed(k) {
                     continue;
                 }
-                let fat_point = *p - normals[k] * c.skin.fat_m[k];
+                let fat_point = p - normal * c.skin.fat_m[k];
                 for (s, inst) in instances.iter().enumerate() {
                     assert!(
                         inst.value_world(fat_point) >= 0.0,
@@ -1257,12 +1252,9 @@ mod file_tests {
             // Outward normals point away from the body axis on average.
             let centre =
                 c.skin.positions_m.iter().copied().sum::<Vec3>() / c.skin.point_count() as f32;
-            let outward = c
-                .skin
-                .positions_m
+            let outward = points
                 .iter()
-                .zip(&normals)
-                .filter(|(p, n)| (**p - centre).dot(**n) > 0.0)
+                .filter(|(p, n)| (*p - centre).dot(*n) > 0.0)
                 .count();
             assert!(
                 outward * 10 > c.skin.point_count() * 8,

@@ -173,6 +173,21 @@ impl Character {
         );
     }
 
+    /// The character as it is built: every shape placed in the neutral posture at time 0, and
+    /// the skin's stored points with their outward unit normals (world frame). What the
+    /// global attach and the checks of a fresh skin start from.
+    pub fn neutral_layout(&self) -> (Vec<ShapeInstance>, Vec<(Vec3, Vec3)>) {
+        let posture = Posture::neutral(&self.skeleton);
+        let pose = self.skeleton.forward_kinematics(&posture);
+        let mut instances = Vec::new();
+        self.shape_instances_into(&posture, &pose, 0.0, &mut instances);
+        let mut normals = Vec::new();
+        self.skin
+            .outward_normals(&self.skin.positions_m, &mut normals);
+        let points = self.skin.positions_m.iter().copied().zip(normals).collect();
+        (instances, points)
+    }
+
     /// World positions of the fixed skin rows for a skeleton pose: row 0 (M points) followed by
     /// row N−1 (M points), written into `out`.
     pub fn boundary_positions_into(&self, pose: &SkeletonPose, out: &mut Vec<Vec3>) {

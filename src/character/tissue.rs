@@ -243,16 +243,8 @@ pub fn anchor_for_point(
 /// (else the nearest muscle surface point), with the given parameters. Empty if the character
 /// has no shapes.
 pub fn attach_global(character: &super::Character, params: &AttachParams) -> Vec<TissueSpring> {
-    let skeleton = &character.skeleton;
-    let posture = super::Posture::neutral(skeleton);
-    let pose = skeleton.forward_kinematics(&posture);
-    let mut instances = Vec::new();
-    character.shape_instances_into(&posture, &pose, 0.0, &mut instances);
-    let mut normals = Vec::new();
-    let skin = &character.skin;
-    skin.outward_normals(&skin.positions_m, &mut normals);
-    let mut springs = Vec::with_capacity(skin.point_count());
-    let points: Vec<(Vec3, Vec3)> = skin.positions_m.iter().copied().zip(normals).collect();
+    let (instances, points) = character.neutral_layout();
+    let mut springs = Vec::with_capacity(points.len());
     let found = anchors_for_points(&instances, &points, params.max_ray_m);
     for (k, found) in found.into_iter().enumerate() {
         if let Some((shape, anchor, distance)) = found {
@@ -272,8 +264,8 @@ pub fn attach_global(character: &super::Character, params: &AttachParams) -> Vec
 #[cfg(test)]
 mod attach_tests {
     use super::*;
+    use crate::character::PROJECTION_TOLERANCE_M;
     use crate::character::examples::build;
-    use crate::character::{PROJECTION_TOLERANCE_M, Posture};
 
     #[test]
     fn attach_gives_one_spring_per_point_to_a_surface_point_below_it() {
@@ -287,12 +279,7 @@ mod attach_tests {
             };
             let springs = attach_global(&c, &params);
             assert_eq!(springs.len(), c.skin.point_count(), "{name}");
-            let posture = Posture::neutral(&c.skeleton);
-            let pose = c.skeleton.forward_kinematics(&posture);
-            let mut instances = Vec::new();
-            c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
-            let mut normals = Vec::new();
-            c.skin.outward_normals(&c.skin.positions_m, &mut normals);
+            let (instances, points) = c.neutral_layout();
             let mut below = 0;
             for (k, s) in springs.iter().enumerate() {
                 assert_eq!(s.skin_point as usize, k);
@@ -308,7 +295,7 @@ mod attach_tests {
                 );
                 let l = c.skin.positions_m[k] - anchor;
                 assert!((l.length() - s.rest_length_m).abs() < 1e-4);
-                if l.normalize_or_zero().dot(normals[k]) > 0.7 {
+                if l.normalize_or_zero().dot(points[k].1) > 0.7 {
                     below += 1;
                 }
             }
@@ -325,13 +312,7 @@ mod attach_tests {
     fn many_points_at_once_give_the_one_by_one_anchors_in_order() {
         // 32×32 = 1024 points: enough for every core of a 4-core machine to take a share.
         let c = build("torso", 32, 32).expect("example");
-        let posture = Posture::neutral(&c.skeleton);
-        let pose = c.skeleton.forward_kinematics(&posture);
-        let mut instances = Vec::new();
-        c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
-        let mut normals = Vec::new();
-        c.skin.outward_normals(&c.skin.positions_m, &mut normals);
-        let points: Vec<(Vec3, Vec3)> = c.skin.positions_m.iter().copied().zip(normals).collect();
+        let (instances, points) = c.neutral_layout();
         let batch = anchors_for_points(&instances, &points, 0.3);
         assert_eq!(batch.len(), points.len());
         for (k, (&(p, n), got)) in points.iter().zip(&batch).enumerate() {
