@@ -1158,6 +1158,27 @@ crate::sim::simd::multiversion! {
     }
 }
 
+/// Spring `q`'s velocity part over its mass: with the pull `max(pos + k_d l̇·d̂, 0)` in place of
+/// its position part `pos`, `(total − pos)/m` (multiply by `d̂` and subtract from the point's
+/// acceleration). `l̇` is the point's velocity `pv` less the anchor's `av`; `d` is `d̂`.
+#[inline(always)]
+fn tissue_pull_change(
+    pv: [&[f32]; 3],
+    av: [&[f32]; 3],
+    d: [&[f32]; 3],
+    pos: f32,
+    kd: f32,
+    inv_mass: f32,
+    q: usize,
+) -> f32 {
+    let mut ldot_dir = 0.0;
+    for c in 0..3 {
+        ldot_dir += (pv[c][q] - av[c][q]) * d[c][q];
+    }
+    let total = (pos + kd * ldot_dir).max(0.0);
+    (total - pos) * inv_mass
+}
+
 crate::sim::simd::multiversion! {
     /// [`damping_accel_from`] and then [`tissue_velocity_pass`] on the points of a contiguous
     /// run of springs (one per point), in one pass: `a = a_pos − (γ/m) v`, then
@@ -1188,13 +1209,7 @@ crate::sim::simd::multiversion! {
                 ap[1][q] - dpm[q] * pv[1][q],
                 ap[2][q] - dpm[q] * pv[2][q],
             ];
-            let mut ldot_dir = 0.0;
-            for c in 0..3 {
-                ldot_dir += (pv[c][q] - av[c][q]) * d[c][q];
-            }
-            let p = pos[q];
-            let total = (p + kd[q] * ldot_dir).max(0.0);
-            let k = (total - p) * inv_mass[q];
+            let k = tissue_pull_change(pv, av, d, pos[q], kd[q], inv_mass[q], q);
             acx[q] = damped[0] - k * d[0][q];
             acy[q] = damped[1] - k * d[1][q];
             acz[q] = damped[2] - k * d[2][q];
@@ -1224,13 +1239,7 @@ crate::sim::simd::multiversion! {
         let [acx, acy, acz] = accel;
         let (acx, acy, acz) = (&mut acx[..ns], &mut acy[..ns], &mut acz[..ns]);
         for q in 0..ns {
-            let mut ldot_dir = 0.0;
-            for c in 0..3 {
-                ldot_dir += (pv[c][q] - av[c][q]) * d[c][q];
-            }
-            let p = pos[q];
-            let total = (p + kd[q] * ldot_dir).max(0.0);
-            let k = (total - p) * inv_mass[q];
+            let k = tissue_pull_change(pv, av, d, pos[q], kd[q], inv_mass[q], q);
             acx[q] -= k * d[0][q];
             acy[q] -= k * d[1][q];
             acz[q] -= k * d[2][q];
