@@ -309,14 +309,28 @@ mod tests {
 
     use super::*;
     use crate::character::examples;
-    use crate::character::{Posture, SkeletonPose};
+    use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
+
+    /// The character's shapes 0.7 s into its first motion, where the torso's muscles that
+    /// follow joints are tapered, twisted and bent far from rest.
+    fn bent_shapes(character: &Character) -> Vec<ShapeInstance> {
+        let motion = &character.motions[0];
+        let mut posture = Posture::neutral(&character.skeleton);
+        motion.posture_at_into(0.7, &mut posture);
+        let mut pose = SkeletonPose::default();
+        character
+            .skeleton
+            .forward_kinematics_into(&posture, &mut pose);
+        let mut shapes = Vec::new();
+        character.shape_instances_into(&posture, &pose, 0.7, &mut shapes);
+        shapes
+    }
 
     #[test]
     fn placed_anchors_match_the_shapes_own_mapping_in_a_bent_posture() {
         // The torso has tapered, twisted and bent muscles whose deformations follow joints:
         // take a posture from the middle of its motion, where they are far from rest.
         let character = examples::build("torso", 16, 16).expect("the torso example exists");
-        let motion = character.motions[0].clone();
         let springs = Springs {
             shape: character.tissue.iter().map(|t| t.shape.0).collect(),
             anchor_rest_m: character.tissue.iter().map(|t| t.anchor_rest_m).collect(),
@@ -328,14 +342,7 @@ mod tests {
         springs.anchor_rest_m.push(Vec3::new(0.1, 0.2, 0.3));
         let table = AnchorTable::new(&springs, character.shapes.len());
         assert_eq!(table.len(), springs.shape.len());
-        let mut posture = Posture::neutral(&character.skeleton);
-        motion.posture_at_into(0.7, &mut posture);
-        let mut pose = SkeletonPose::default();
-        character
-            .skeleton
-            .forward_kinematics_into(&posture, &mut pose);
-        let mut shapes = Vec::new();
-        character.shape_instances_into(&posture, &pose, 0.7, &mut shapes);
+        let shapes = bent_shapes(&character);
         let deformed = shapes
             .iter()
             .filter(|s| !s.geometry.is_undeformed())
@@ -368,6 +375,7 @@ mod tests {
             assert_eq!([out[0][q], out[1][q], out[2][q]], [0.0; 3], "spring {q}");
         }
     }
+
     #[test]
     fn anchors_in_long_runs_go_straight_into_place() {
         // Springs whose shapes come in runs of 1 to 40 consecutive springs (placed run by run:
@@ -398,15 +406,7 @@ mod tests {
         };
         let table = AnchorTable::new(&springs, shape_count);
         assert!(table.runs.len() * RUN_MIN <= n, "{} runs", table.runs.len());
-        let motion = character.motions[0].clone();
-        let mut posture = Posture::neutral(&character.skeleton);
-        motion.posture_at_into(0.7, &mut posture);
-        let mut pose = SkeletonPose::default();
-        character
-            .skeleton
-            .forward_kinematics_into(&posture, &mut pose);
-        let mut shapes = Vec::new();
-        character.shape_instances_into(&posture, &pose, 0.7, &mut shapes);
+        let shapes = bent_shapes(&character);
         assert!(shapes.iter().any(|s| !s.geometry.is_undeformed()));
         let (mut out, mut scratch) = (Default::default(), Default::default());
         table.place(&shapes, &mut out, &mut scratch);
