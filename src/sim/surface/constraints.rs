@@ -88,12 +88,14 @@ struct PassScratch {
     hit: Vec<u8>,
     /// The hits' positions in the run.
     hit_index: Vec<u32>,
-    /// The gated points' positions in a sparse run.
-    gated_index: Vec<u32>,
     batch: Batch,
     project: Batch,
-    /// Number of gated points before each index.
-    gate_prefix: Vec<u32>,
+    /// The gated points in ascending order, unless every free point is gated (`all_gated`): a
+    /// run's gated points are found by two binary searches, so a sparse round (later rounds,
+    /// re-checks) costs nothing per ungated point.
+    gated: Vec<u32>,
+    /// Every free point is gated (the first round of a full pass).
+    all_gated: bool,
     /// The runs of one shape that hold gated points.
     active_runs: Vec<(u32, u32)>,
     /// Original shape-space positions of `project`'s entries.
@@ -296,8 +298,9 @@ impl Broadphase {
 }
 
 /// Applies the constraints to a candidate state in place. `grid` must hold the full grid of the
-/// candidate positions and `normals` its normals. The free points of `x`, `v` and the grid are
-/// updated together. `only` restricts the pass to those free points (a re-check); the points
+/// candidate positions and `normals` its normals (a re-check reads only those of the points in
+/// `only`). The free points of `x`, `v` and the grid are updated together. `only` restricts the
+/// pass to those free points (a re-check); the points
 /// moved by more than `input.recheck_m` are written to `touched`.
 #[allow(clippy::too_many_arguments)]
 pub fn enforce(
@@ -333,6 +336,7 @@ pub fn enforce(
             q[f] = g[f] - n[f] * fat[f];
         }
     }
+    sc.gated.clear();
     match only {
         None => sc.gate.fill(1),
         Some(list) => {
@@ -342,8 +346,13 @@ pub fn enforce(
                     *g = 1;
                 }
             }
+            sc.gated
+                .extend(list.iter().copied().filter(|&f| (f as usize) < free));
+            sc.gated.sort_unstable();
+            sc.gated.dedup();
         }
     }
+    sc.all_gated = only.is_none();
     sc.moved_round.fill(u8::MAX);
     sc.moved.clear();
     for round in 0..input.rounds.min(MAX_ROUNDS) {
@@ -352,17 +361,21 @@ pub fn enforce(
             for (g, r) in sc.gate.iter_mut().zip(&sc.moved_round) {
                 *g = u8::from(*r == previous);
             }
+            // Only the points moved in the previous round are gated now.
+            let (moved_round, gated) = (&sc.moved_round, &mut sc.gated);
+            gated.clear();
+            gated.extend(
+                sc.moved
+                    .iter()
+                    .copied()
+                    .filter(|&f| moved_round[f as usize] == previous),
+            );
+            gated.sort_unstable();
+            sc.all_gated = false;
         }
         let mut changed = 0usize;
-        // Gated points up to each index, so runs without any are skipped outright.
-        let everyone = round == 0 && only.is_none();
-        sc.gate_prefix.resize(free + 1, 0);
-        let mut total = 0u32;
-        for (p, g) in sc.gate_prefix[1..].iter_mut().zip(&sc.gate) {
-            total += u32::from(*g);
-            *p = total;
-        }
-        if total == 0 {
+        let everyone = sc.all_gated;
+        if !everyone && sc.gated.is_empty() {
             break;
         }
         for (s_idx, s) in shapes.iter().enumerate() {
@@ -375,12 +388,12 @@ pub fn enforce(
                 &broad.runs[a..b]
             } else {
                 active.clear();
-                let prefix = &sc.gate_prefix;
+                let gated = &sc.gated;
                 active.extend(
                     broad.runs[a..b]
                         .iter()
                         .copied()
-                        .filter(|&(a, b)| prefix[b as usize] > prefix[a as usize]),
+                        .filter(|&(a, b)| !gated_in(gated, a, b).is_empty()),
                 );
                 &active
             };
@@ -705,25 +718,24 @@ impl Filter<'_> {
 /// the positions (in the run) of those that pass in `sc.hit_index`.
 fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed: Owed) {
     let len = b - a;
-    sc.hit.resize(len.next_multiple_of(8), 0);
-    let gated = (sc.gate_prefix[b] - sc.gate_prefix[a]) as usize;
-    if gated * SPARSE_RATIO < len {
+    let in_run = if sc.all_gated {
+        None
+    } else {
+        Some(gated_in(&sc.gated, a as u32, b as u32))
+    };
+    if let Some(points) = in_run.filter(|p| p.len() * SPARSE_RATIO < len) {
         // Few gated points (later rounds, re-checks): test just those.
-        sc.hit[..len].copy_from_slice(&sc.gate[a..b]);
-        sc.hit[len..].fill(0);
-        let mut gated = std::mem::take(&mut sc.gated_index);
-        collect_hits(&sc.hit, &mut gated);
         sc.hit_index.clear();
-        for &i in &gated {
-            let f = a + i as usize;
+        for &f in points {
+            let f = f as usize;
             let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
             if filter.contains(q) && owed.test(sc, f) {
-                sc.hit_index.push(i);
+                sc.hit_index.push((f - a) as u32);
             }
         }
-        sc.gated_index = gated;
         return;
     }
+    sc.hit.resize(len.next_multiple_of(8), 0);
     let (qx, qy, qz, gate) = (
         &sc.q[0][a..b],
         &sc.q[1][a..b],
@@ -745,6 +757,14 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
         hits.retain(|&i| owed.test(sc, a + i as usize));
         sc.hit_index = hits;
     }
+}
+
+/// The gated points in `[a, b)`, a slice of the ascending list `gated`.
+#[inline]
+fn gated_in(gated: &[u32], a: u32, b: u32) -> &[u32] {
+    let lo = gated.partition_point(|&f| f < a);
+    let hi = lo + gated[lo..].partition_point(|&f| f < b);
+    &gated[lo..hi]
 }
 
 /// Appends the indices of the non-zero bytes of `mask` (whose length is a multiple of 8 and
