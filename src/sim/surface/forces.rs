@@ -261,6 +261,32 @@ pub fn grid_normals_strided(
     strided_normals_pass(m, along, si.min(m / 2).max(1), sj, grid, out);
 }
 
+/// [`grid_normals_strided`] at the listed nodes only (grid indices `j · M + i`; others out of
+/// range are skipped), with the same value at each: for passes that read the normals of a few
+/// nodes (the constraint re-checks). The other entries of `out` are left as they are, and
+/// `out` must already have one entry per node.
+pub fn grid_normals_strided_at(
+    around: usize,
+    along: usize,
+    stride: (usize, usize),
+    grid: &[Vec<f32>; 3],
+    nodes: impl IntoIterator<Item = usize>,
+    out: &mut [Vec<f32>; 3],
+) {
+    let m = around;
+    let len = m * along;
+    if m < 2 || along < 2 || grid.iter().chain(out.iter()).any(|g| g.len() != len) {
+        return;
+    }
+    let stride = (stride.0.max(1).min(m / 2).max(1), stride.1.max(1));
+    for k in nodes.into_iter().filter(|&k| k < len) {
+        let n = normal_node_strided(m, along, grid, k % m, k / m, stride);
+        out[0][k] = n[0];
+        out[1][k] = n[1];
+        out[2][k] = n[2];
+    }
+}
+
 /// The normals of the `len` nodes from `o` on: node `o + k` from the differences
 /// `g[a + k] − g[b + k]` (around) and `g[c + k] − g[d + k]` (along) with `[a, b, c, d] = src`,
 /// as [`unit_normal`] does for one node. The slices are cut to one length so the loop has no
@@ -1818,6 +1844,19 @@ mod kernel_tests {
             grid[1][(n - 1) * m / 3] = f32::NAN;
             for stride in strides {
                 let want = grid_normals_strided_reference(m, n, stride, &grid);
+                // Node by node (every third node, and one out of range): the same bits there,
+                // the other entries untouched.
+                let mut some: [Vec<f32>; 3] = [0, 1, 2].map(|_| vec![f32::NAN; m * n]);
+                grid_normals_strided_at(m, n, stride, &grid, (0..=m * n).step_by(3), &mut some);
+                for c in 0..3 {
+                    for (k, (g, w)) in some[c].iter().zip(&want[c]).enumerate() {
+                        if k % 3 == 0 {
+                            assert_eq!(g.to_bits(), w.to_bits(), "{m}x{n} {stride:?} node {k}");
+                        } else {
+                            assert!(g.is_nan(), "{m}x{n} {stride:?}: node {k} was written");
+                        }
+                    }
+                }
                 // Twice through the same output, which starts full of NaN: every node is written.
                 let mut got: [Vec<f32>; 3] = [0, 1, 2].map(|_| vec![f32::NAN; m * n]);
                 for _ in 0..2 {

@@ -1238,8 +1238,18 @@ fn constrain_candidate(
         // points: further passes over the corrected points and their neighbours with the
         // new normals, until nothing moves (at most 4).
         passes += 1;
-        fat_normals(core, &w.force.grid, &mut w.normals);
         constraints::neighbourhood(core.around, free, &w.touched, &mut w.flags, &mut w.recheck);
+        // The pass reads the normals of the re-checked points only (their fat points, and the
+        // moved ones' new positions), so only theirs are brought up to date.
+        let nodes = w.recheck.iter().map(|&f| core.around + f as usize);
+        forces::grid_normals_strided_at(
+            core.around,
+            core.along,
+            fat_stride(core),
+            &w.force.grid,
+            nodes,
+            &mut w.normals,
+        );
         let second = constraints::enforce(
             &input,
             &mut w.broad,
