@@ -613,6 +613,42 @@ impl ShapeGeometry {
         self.bound_radius_m
     }
 
+    /// A conservative half-extent box of the deformed shape in its own frame (every shape point
+    /// `p` has `|p_i| ≤ extent_i`), metres.
+    pub fn extent_m(&self) -> Vec3 {
+        let mut e = match self.primitive {
+            Primitive::Sphere { radius_m } => Vec3::splat(radius_m),
+            Primitive::Superellipsoid { radii_m, .. } => radii_m,
+            Primitive::Cylinder {
+                radius_m,
+                half_length_m,
+            } => Vec3::new(radius_m, half_length_m, radius_m),
+        };
+        for d in self.deformations() {
+            e = match *d {
+                Resolved::Taper { rate_per_m } => {
+                    let scale = (1.0 + rate_per_m.abs() * e.y).max(1.0);
+                    Vec3::new(e.x * scale, e.y, e.z * scale)
+                }
+                Resolved::Twist { .. } => {
+                    let rho = (e.x * e.x + e.z * e.z).sqrt();
+                    Vec3::new(rho, e.y, rho)
+                }
+                Resolved::Bend { curvature_per_m } => {
+                    if curvature_per_m.abs() < MIN_CURVATURE_PER_M {
+                        e
+                    } else {
+                        // The bend maps the xy disc of radius r into that of radius √2·r
+                        // (`Resolved::bound`); z is unchanged.
+                        let r = (e.x * e.x + e.y * e.y).sqrt() * std::f32::consts::SQRT_2;
+                        Vec3::new(r, r, e.z)
+                    }
+                }
+            };
+        }
+        e
+    }
+
     /// Rest space to shape (deformed) space.
     pub fn deform(&self, p_rest: Vec3) -> Vec3 {
         self.deformations().iter().fold(p_rest, |p, d| d.apply(p))

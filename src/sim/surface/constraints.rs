@@ -10,7 +10,7 @@
 //! - **Broadphase with temporal coherence.** Per shape, the free points that may meet it are
 //!   kept as *runs* of consecutive point indices (the skin grid is spatially coherent, so a
 //!   muscle meets a few arcs of a few rows). The runs are built from each shape's conservative
-//!   box in its own frame ([`extent_m`]), grown by the largest fat and a margin, testing only
+//!   box in its own frame ([`ShapeGeometry::extent_m`]), grown by the largest fat and a margin, testing only
 //!   grid rows whose bounding box meets the shape's world box (a two-level hierarchy). They
 //!   stay valid while the points' accumulated movement (`max |v|·h` per step) plus each
 //!   shape's movement (translation, rotation angle × extent, growth of the extent) stays below
@@ -33,7 +33,7 @@
 
 use glam::{Affine3A, Vec3};
 
-use super::kernels::{Batch, extent_m};
+use super::kernels::Batch;
 use crate::character::{PROJECTION_TOLERANCE_M, Primitive, ShapeGeometry, ShapeInstance};
 
 /// Rounds over the shapes in one pass (a point pushed into a neighbouring muscle is fixed in
@@ -178,7 +178,7 @@ impl Broadphase {
         self.moved_m += input.max_speed_m_per_s * input.h_s;
         self.extents.clear();
         self.extents
-            .extend(shapes.iter().map(|s| extent_m(&s.geometry)));
+            .extend(shapes.iter().map(|s| s.geometry.extent_m()));
         let mut shape_moved = 0.0f32;
         if self.ref_frames.len() == shapes.len() {
             for (k, s) in shapes.iter().enumerate() {

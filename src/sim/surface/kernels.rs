@@ -498,42 +498,6 @@ crate::sim::simd::multiversion! {
     }
 }
 
-/// A conservative half-extent box of the deformed shape in its own frame (every shape point
-/// `p` has `|p_i| ≤ extent_i`), metres.
-pub fn extent_m(geometry: &ShapeGeometry) -> Vec3 {
-    let mut e = match geometry.primitive {
-        Primitive::Sphere { radius_m } => Vec3::splat(radius_m),
-        Primitive::Superellipsoid { radii_m, .. } => radii_m,
-        Primitive::Cylinder {
-            radius_m,
-            half_length_m,
-        } => Vec3::new(radius_m, half_length_m, radius_m),
-    };
-    for d in geometry.deformations() {
-        e = match *d {
-            Resolved::Taper { rate_per_m } => {
-                let scale = (1.0 + rate_per_m.abs() * e.y).max(1.0);
-                Vec3::new(e.x * scale, e.y, e.z * scale)
-            }
-            Resolved::Twist { .. } => {
-                let rho = (e.x * e.x + e.z * e.z).sqrt();
-                Vec3::new(rho, e.y, rho)
-            }
-            Resolved::Bend { curvature_per_m } => {
-                if curvature_per_m.abs() < MIN_CURVATURE_PER_M {
-                    e
-                } else {
-                    // The bend maps the xy disc of radius r into that of radius √2·r
-                    // (`Resolved::bound`); z is unchanged.
-                    let r = (e.x * e.x + e.y * e.y).sqrt() * std::f32::consts::SQRT_2;
-                    Vec3::new(r, r, e.z)
-                }
-            }
-        };
-    }
-    e
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -648,7 +612,7 @@ mod tests {
     fn the_extent_box_contains_every_shape() {
         let mut noise = Noise(23);
         for g in geometries() {
-            let e = extent_m(&g);
+            let e = g.extent_m();
             // Surface points from rest-space radial projections, deformed.
             let mut largest = Vec3::ZERO;
             for _ in 0..4000 {
