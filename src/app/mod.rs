@@ -6,5 +6,6 @@ pub mod replay;
 pub mod scene;
 pub mod scheduler;
 pub mod setup;
+pub mod skin_display;
 pub mod state;
 pub mod vehicle;

@@ -7,7 +7,8 @@
 //! screen already live there. So the stereo module's views (made in the calibration's frame)
 //! apply unchanged.
 
-use crate::character::{Character, Posture, SkeletonPose};
+use crate::app::skin_display;
+use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
 use crate::pose::Pose;
 use crate::render::adapter::{TessellationDetail, kind_from_name, tessellate_primitive};
 use crate::render::mesh::TriMesh;
@@ -95,38 +96,48 @@ pub fn build_scene(inputs: &SceneInputs<'_>) -> Scene {
     let to_physical = |p: Vec3| inputs.vehicle_from_world.transform_point(p);
     let character = inputs.character;
 
+    // The shapes placed and deformed for this posture: drawn, and read by the skin's display
+    // clearance and the tissue springs.
+    let mut instances = Vec::with_capacity(character.shapes.len());
+    character.shape_instances_into(
+        inputs.posture,
+        inputs.skeleton_pose,
+        inputs.time_s,
+        &mut instances,
+    );
+
     let (around, along) = inputs.skin_grid;
     let skin = (inputs.skin_positions_world.len() == around as usize * along as usize
         && around >= 3
         && along >= 2)
         .then(|| {
-            let positions: Vec<Vec3> = inputs
-                .skin_positions_world
-                .iter()
-                .map(|&p| to_physical(p))
-                .collect();
             // Drawn as a smooth surface through the simulated points, so coarse skins do not
-            // cut chords through the muscles under them (render::subdivide).
+            // cut chords through the muscles under them (render::subdivide), and kept outside
+            // the muscles where a muscle bulges between the points (skin_display).
             let level = subdivide::display_level(around);
             let (rm, rn) = subdivide::refined_size(around, along, level);
-            let refined = subdivide::refine_skin_grid(&positions, around, along, level);
+            let mut refined =
+                subdivide::refine_skin_grid(inputs.skin_positions_world, around, along, level);
+            let fat = skin_display::resample_field(
+                &character.skin.fat_m,
+                character.skin.around as usize,
+                character.skin.along as usize,
+                rm as usize,
+                rn as usize,
+            );
+            skin_display::keep_outside(&mut refined, rm as usize, rn as usize, &fat, &instances);
+            let positions = refined.into_iter().map(to_physical).collect();
             SkinSurface {
-                mesh: TriMesh::from_triangles(refined, skin_indices(rm, rn)),
+                mesh: TriMesh::from_triangles(positions, skin_indices(rm, rn)),
                 color: Rgba::SKIN.with_alpha(inputs.skin_opacity.clamp(0.05, 1.0)),
             }
         });
 
     let mut shapes = Vec::with_capacity(character.shapes.len());
-    for (k, shape) in character.shapes.iter().enumerate() {
+    for (k, (shape, instance)) in character.shapes.iter().zip(&instances).enumerate() {
         let Some(rest) = inputs.shape_meshes.rest.get(k) else {
             continue;
         };
-        let instance = shape.instance(
-            &character.skeleton,
-            inputs.posture,
-            inputs.skeleton_pose,
-            inputs.time_s,
-        );
         let world_from_shape = Mat4::from(instance.world_from_shape);
         let mesh = if instance.geometry.is_undeformed() {
             Arc::clone(rest)
@@ -171,7 +182,7 @@ pub fn build_scene(inputs: &SceneInputs<'_>) -> Scene {
         .collect();
 
     let springs = if inputs.layers.springs {
-        tissue_segments(inputs)
+        tissue_segments(inputs, &instances)
     } else {
         Vec::new()
     };
@@ -242,16 +253,9 @@ pub fn build_scene(inputs: &SceneInputs<'_>) -> Scene {
     }
 }
 
-fn tissue_segments(inputs: &SceneInputs<'_>) -> Vec<Segment> {
+fn tissue_segments(inputs: &SceneInputs<'_>, instances: &[ShapeInstance]) -> Vec<Segment> {
     let character = inputs.character;
     let mut out = Vec::with_capacity(character.tissue.len());
-    let mut instances = Vec::new();
-    character.shape_instances_into(
-        inputs.posture,
-        inputs.skeleton_pose,
-        inputs.time_s,
-        &mut instances,
-    );
     for spring in &character.tissue {
         let (Some(p), Some(shape)) = (
             inputs.skin_positions_world.get(spring.skin_point as usize),
@@ -323,5 +327,75 @@ mod tests {
         assert_eq!(kind_from_name("left femur"), ShapeKind::Bone);
         assert_eq!(kind_from_name("Ribcage"), ShapeKind::Bone);
         assert_eq!(kind_from_name("biceps"), ShapeKind::Muscle);
+    }
+
+    #[test]
+    fn the_drawn_skin_of_a_bent_torso_stays_outside_its_muscles() {
+        use crate::character::examples;
+        use crate::sim::surface::SurfaceModel;
+        use crate::sim::{DeformationModel, IntegratorKind, MotionPoses, Unlimited};
+
+        // The 32x32 torso 0.7 s into its motion (shoulders raised): the muscles bulge between
+        // the simulated points there.
+        let character = examples::build("torso", 32, 32).expect("the torso example exists");
+        let motion = character.motions[0].clone();
+        let t = 0.7;
+        let mut model = SurfaceModel::new(character.clone(), IntegratorKind::Verlet).expect("sim");
+        model.advance(t, &mut MotionPoses(&motion), &mut Unlimited, None);
+        let mut surface = crate::sim::SurfaceMesh::default();
+        model.surface_mesh_into(&mut surface);
+        let mut posture = Posture::neutral(&character.skeleton);
+        motion.posture_at_into(t as f32, &mut posture);
+        let mut pose = SkeletonPose::default();
+        character
+            .skeleton
+            .forward_kinematics_into(&posture, &mut pose);
+        let mut shapes = Vec::new();
+        character.shape_instances_into(&posture, &pose, t as f32, &mut shapes);
+        // Deepest point of a drawn surface inside any muscle, metres.
+        let deepest = |points: &[Vec3]| {
+            let mut worst = 0.0f32;
+            for p in points {
+                for s in &shapes {
+                    let local = s.shape_from_world.transform_point3(*p);
+                    if s.geometry.value(local) < 0.0 {
+                        worst = worst.max((s.geometry.project(local) - local).length());
+                    }
+                }
+            }
+            worst
+        };
+        let (m, n) = model.resolution();
+        let level = subdivide::display_level(m);
+        let smooth = subdivide::refine_skin_grid(&surface.positions_m, m, n, level);
+        let before = deepest(&smooth);
+        assert!(
+            before > 2e-3,
+            "the interpolated skin should cut the muscles here: {before} m"
+        );
+
+        let shape_meshes = ShapeMeshes::new(&character);
+        let scene = build_scene(&SceneInputs {
+            character: &character,
+            shape_meshes: &shape_meshes,
+            posture: &posture,
+            skeleton_pose: &pose,
+            time_s: t as f32,
+            skin_positions_world: &surface.positions_m,
+            skin_grid: (m, n),
+            vehicle_from_world: Pose::IDENTITY,
+            wand_physical: None,
+            screen_corners: [Vec3::ZERO; 4],
+            layers: Layers::default(),
+            skin_opacity: 1.0,
+        });
+        let drawn = &scene.skin.expect("the skin is drawn").mesh.positions;
+        assert_eq!(drawn.len(), smooth.len());
+        assert!(drawn.iter().all(|p| p.is_finite()));
+        let after = deepest(drawn);
+        assert!(
+            after < 1e-4,
+            "the drawn skin is still {after} m inside a muscle (was {before})"
+        );
     }
 }

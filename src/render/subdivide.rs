@@ -12,7 +12,9 @@
 //! linearly (`p₋₁ = 2p₀ − p₁`), so the end rows, which are fixed to the skeleton, stay put and
 //! the curve is straight there rather than overshooting.
 //!
-//! This is for display only: the simulation and picking keep the simulated grid.
+//! This is for display only: the simulation and picking keep the simulated grid. Where a muscle
+//! bulges between grid points even the smooth surface passes through it; the app then moves
+//! those display points out ([`crate::app::skin_display`]).
 
 use glam::Vec3;
 

@@ -23,7 +23,7 @@ mod anchors;
 pub mod constraints;
 mod fastmath;
 pub mod forces;
-mod kernels;
+pub(crate) mod kernels;
 mod resample;
 #[cfg(test)]
 mod tests;
