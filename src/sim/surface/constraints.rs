@@ -98,8 +98,8 @@ struct PassScratch {
     all_gated: bool,
     /// The runs of one shape that hold gated points.
     active_runs: Vec<(u32, u32)>,
-    /// Original shape-space positions of `project`'s entries.
-    origin: Vec<Vec3>,
+    /// Original shape-space positions of `project`'s entries (SoA).
+    origin: [Vec<f32>; 3],
     /// All ones, per free point (the rebuild's filters test every point).
     ones: Vec<u8>,
     /// Grid-row boxes (rebuild).
@@ -596,15 +596,8 @@ fn general_stage(
     let geometry = &s.geometry;
     // Signs first (cheap), then values and gradients of the inside points only.
     sc.batch.evaluate(geometry, false);
-    sc.project.clear();
-    sc.origin.clear();
-    for i in 0..sc.batch.len() {
-        if sc.batch.value[i] < 0.0 {
-            let p = sc.batch.position(i);
-            sc.origin.push(p);
-            sc.project.push(sc.batch.point[i], p);
-        }
-    }
+    sc.project.assign_inside_of(&sc.batch);
+    sc.origin.clone_from(&sc.project.p);
     if sc.project.is_empty() {
         return 0;
     }
@@ -626,7 +619,7 @@ fn general_stage(
     let mut moved = 0;
     for i in 0..sc.project.len() {
         let converged = on_surface(sc.project.value[i], sc.project.gradient(i));
-        let local = sc.origin[i];
+        let local = Vec3::new(sc.origin[0][i], sc.origin[1][i], sc.origin[2][i]);
         let on_surface = if converged {
             sc.project.position(i)
         } else {

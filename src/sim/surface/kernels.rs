@@ -59,6 +59,40 @@ impl Batch {
         self.p[2].push(p.z);
     }
 
+    /// Replaces the entries with those of `src` whose value is negative (inside), in order:
+    /// a branch-free compaction (every entry is written, the count advances only for the inside
+    /// ones), so a mix of inside and outside points costs no mispredicted branches.
+    pub fn assign_inside_of(&mut self, src: &Batch) {
+        let n = src.len().min(src.value.len());
+        self.point.resize(n, 0);
+        for c in &mut self.p {
+            c.resize(n, 0.0);
+        }
+        let [px, py, pz] = &mut self.p;
+        let (px, py, pz, point) = (
+            &mut px[..n],
+            &mut py[..n],
+            &mut pz[..n],
+            &mut self.point[..n],
+        );
+        let [sx, sy, sz] = &src.p;
+        let (sx, sy, sz) = (&sx[..n], &sy[..n], &sz[..n]);
+        let (spoint, value) = (&src.point[..n], &src.value[..n]);
+        let mut k = 0;
+        for i in 0..n {
+            // `k ≤ i < n` throughout.
+            point[k] = spoint[i];
+            px[k] = sx[i];
+            py[k] = sy[i];
+            pz[k] = sz[i];
+            k += usize::from(value[i] < 0.0);
+        }
+        self.point.truncate(k);
+        for c in &mut self.p {
+            c.truncate(k);
+        }
+    }
+
     /// Appends the points `base + i` for each `i` in `hits`, read from the world SoA arrays `q`
     /// and mapped by `shape_from_world`: gathered by index (one resize per call, not four
     /// pushes per point), then transformed in one vectorised pass.
@@ -606,6 +640,31 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn assign_inside_keeps_the_negative_entries_in_order() {
+        let mut src = Batch::default();
+        let values = [-1.0, 2.0, -0.5, 0.0, f32::NAN, -3.0, 1e-30];
+        for (k, _) in values.iter().enumerate() {
+            src.push(
+                10 + k as u32,
+                Vec3::new(k as f32, 2.0 * k as f32, -(k as f32)),
+            );
+        }
+        src.value = values.to_vec();
+        // A destination with stale, longer contents.
+        let mut dst = Batch::default();
+        for k in 0..9 {
+            dst.push(99, Vec3::splat(k as f32));
+        }
+        dst.assign_inside_of(&src);
+        assert_eq!(dst.point, [10, 12, 15]);
+        for (i, k) in [0usize, 2, 5].into_iter().enumerate() {
+            assert_eq!(dst.position(i), src.position(k));
+        }
+        dst.assign_inside_of(&Batch::default());
+        assert!(dst.is_empty() && dst.p.iter().all(|c| c.is_empty()));
     }
 
     #[test]
