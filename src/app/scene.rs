@@ -118,14 +118,19 @@ pub fn build_scene(inputs: &SceneInputs<'_>) -> Scene {
             let (rm, rn) = subdivide::refined_size(around, along, level);
             let mut refined =
                 subdivide::refine_skin_grid(inputs.skin_positions_world, around, along, level);
-            let fat = skin_display::resample_field(
-                &character.skin.fat_m,
-                character.skin.around as usize,
-                character.skin.along as usize,
-                rm as usize,
-                rn as usize,
-            );
-            skin_display::keep_outside(&mut refined, rm as usize, rn as usize, &fat, &instances);
+            // Unrefined (64 points around or more), the drawn points are the simulated ones,
+            // which the simulation keeps outside, and the chords between them are short.
+            if level > 1 {
+                let fat = skin_display::resample_field(
+                    &character.skin.fat_m,
+                    character.skin.around as usize,
+                    character.skin.along as usize,
+                    rm as usize,
+                    rn as usize,
+                );
+                let (rm, rn) = (rm as usize, rn as usize);
+                skin_display::keep_outside(&mut refined, rm, rn, &fat, &instances);
+            }
             let positions = refined.into_iter().map(to_physical).collect();
             SkinSurface {
                 mesh: TriMesh::from_triangles(positions, skin_indices(rm, rn)),

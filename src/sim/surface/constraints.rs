@@ -10,11 +10,11 @@
 //! - **Broadphase with temporal coherence.** Per shape, the free points that may meet it are
 //!   kept as *runs* of consecutive point indices (the skin grid is spatially coherent, so a
 //!   muscle meets a few arcs of a few rows). The runs are built from each shape's conservative
-//!   box in its own frame ([`ShapeGeometry::extent_m`]), grown by the largest fat and a margin, testing only
-//!   grid rows whose bounding box meets the shape's world box (a two-level hierarchy). They
-//!   stay valid while the points' accumulated movement (`max |v|·h` per step) plus each
-//!   shape's movement (translation, rotation angle × extent, growth of the extent) stays below
-//!   the margin, so no shape can reach a point that is not in its runs.
+//!   box in its own frame ([`ShapeGeometry::extent_m`]), grown by the largest fat and a
+//!   margin, testing only grid rows whose bounding box meets the shape's world box (a
+//!   two-level hierarchy). They stay valid while the points' accumulated movement (`max |v|·h`
+//!   per step) plus each shape's movement (translation, rotation angle × extent, growth of the
+//!   extent) stays below the margin, so no shape can reach a point that is not in its runs.
 //! - **Per shape, two stages.** A vectorised loop over the runs maps every fat point into the
 //!   shape frame and keeps those inside the shape's exact extent box (spheres: the exact test
 //!   and projection right there). The survivors form a [`Batch`] whose values and gradients
@@ -300,8 +300,8 @@ impl Broadphase {
 /// Applies the constraints to a candidate state in place. `grid` must hold the full grid of the
 /// candidate positions and `normals` its normals (a re-check reads only those of the points in
 /// `only`). The free points of `x`, `v` and the grid are updated together. `only` restricts the
-/// pass to those free points (a re-check); the points
-/// moved by more than `input.recheck_m` are written to `touched`.
+/// pass to those free points (a re-check); the points moved by more than `input.recheck_m` are
+/// written to `touched`.
 #[allow(clippy::too_many_arguments)]
 pub fn enforce(
     input: &ConstraintInput<'_>,
