@@ -277,6 +277,91 @@ fn tissue_segments(inputs: &SceneInputs<'_>, instances: &[ShapeInstance]) -> Vec
     out
 }
 
+/// The paper's torso (example `torso`, 32×32 skin) simulated with Verlet 0.7 s into its first
+/// motion, shoulders raised, where its muscles bulge between the simulated points: the scene
+/// state of the display tests and of the scene benchmark (`benches/scene.rs`).
+pub struct BentTorso {
+    /// The character.
+    pub character: Character,
+    /// Its tessellated shapes.
+    pub shape_meshes: ShapeMeshes,
+    /// The posture at [`Self::time_s`].
+    pub posture: Posture,
+    /// Every joint's world transform for it.
+    pub skeleton_pose: SkeletonPose,
+    /// The simulated skin points, world, metres.
+    pub skin_positions_world: Vec<Vec3>,
+    /// Skin grid size `(around, along)`.
+    pub skin_grid: (u32, u32),
+    /// Motion time, seconds.
+    pub time_s: f32,
+}
+
+impl BentTorso {
+    /// Builds and simulates it (`None` if the example is missing).
+    pub fn new() -> Option<Self> {
+        use crate::sim::surface::SurfaceModel;
+        use crate::sim::{DeformationModel, IntegratorKind, MotionPoses, SurfaceMesh, Unlimited};
+        let time_s = 0.7f32;
+        let character = crate::character::examples::build("torso", 32, 32)?;
+        let motion = character.motions.first()?.clone();
+        let mut model = SurfaceModel::new(character.clone(), IntegratorKind::Verlet).ok()?;
+        model.advance(
+            f64::from(time_s),
+            &mut MotionPoses(&motion),
+            &mut Unlimited,
+            None,
+        );
+        let mut surface = SurfaceMesh::default();
+        model.surface_mesh_into(&mut surface);
+        let mut posture = Posture::neutral(&character.skeleton);
+        motion.posture_at_into(time_s, &mut posture);
+        let mut skeleton_pose = SkeletonPose::default();
+        character
+            .skeleton
+            .forward_kinematics_into(&posture, &mut skeleton_pose);
+        Some(Self {
+            shape_meshes: ShapeMeshes::new(&character),
+            character,
+            posture,
+            skeleton_pose,
+            skin_positions_world: surface.positions_m,
+            skin_grid: model.resolution(),
+            time_s,
+        })
+    }
+
+    /// The shapes placed and deformed for the posture.
+    pub fn shapes(&self) -> Vec<ShapeInstance> {
+        let mut shapes = Vec::new();
+        self.character.shape_instances_into(
+            &self.posture,
+            &self.skeleton_pose,
+            self.time_s,
+            &mut shapes,
+        );
+        shapes
+    }
+
+    /// Scene inputs for it: the world as the physical frame, no wand, default layers.
+    pub fn inputs(&self) -> SceneInputs<'_> {
+        SceneInputs {
+            character: &self.character,
+            shape_meshes: &self.shape_meshes,
+            posture: &self.posture,
+            skeleton_pose: &self.skeleton_pose,
+            time_s: self.time_s,
+            skin_positions_world: &self.skin_positions_world,
+            skin_grid: self.skin_grid,
+            vehicle_from_world: Pose::IDENTITY,
+            wand_physical: None,
+            screen_corners: [Vec3::ZERO; 4],
+            layers: Layers::default(),
+            skin_opacity: 1.0,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -336,27 +421,8 @@ mod tests {
 
     #[test]
     fn the_drawn_skin_of_a_bent_torso_stays_outside_its_muscles() {
-        use crate::character::examples;
-        use crate::sim::surface::SurfaceModel;
-        use crate::sim::{DeformationModel, IntegratorKind, MotionPoses, Unlimited};
-
-        // The 32x32 torso 0.7 s into its motion (shoulders raised): the muscles bulge between
-        // the simulated points there.
-        let character = examples::build("torso", 32, 32).expect("the torso example exists");
-        let motion = character.motions[0].clone();
-        let t = 0.7;
-        let mut model = SurfaceModel::new(character.clone(), IntegratorKind::Verlet).expect("sim");
-        model.advance(t, &mut MotionPoses(&motion), &mut Unlimited, None);
-        let mut surface = crate::sim::SurfaceMesh::default();
-        model.surface_mesh_into(&mut surface);
-        let mut posture = Posture::neutral(&character.skeleton);
-        motion.posture_at_into(t as f32, &mut posture);
-        let mut pose = SkeletonPose::default();
-        character
-            .skeleton
-            .forward_kinematics_into(&posture, &mut pose);
-        let mut shapes = Vec::new();
-        character.shape_instances_into(&posture, &pose, t as f32, &mut shapes);
+        let torso = BentTorso::new().expect("the torso example exists");
+        let shapes = torso.shapes();
         // Deepest point of a drawn surface inside any muscle, metres.
         let deepest = |points: &[Vec3]| {
             let mut worst = 0.0f32;
@@ -370,30 +436,15 @@ mod tests {
             }
             worst
         };
-        let (m, n) = model.resolution();
+        let (m, n) = torso.skin_grid;
         let level = subdivide::display_level(m);
-        let smooth = subdivide::refine_skin_grid(&surface.positions_m, m, n, level);
+        let smooth = subdivide::refine_skin_grid(&torso.skin_positions_world, m, n, level);
         let before = deepest(&smooth);
         assert!(
             before > 2e-3,
             "the interpolated skin should cut the muscles here: {before} m"
         );
-
-        let shape_meshes = ShapeMeshes::new(&character);
-        let scene = build_scene(&SceneInputs {
-            character: &character,
-            shape_meshes: &shape_meshes,
-            posture: &posture,
-            skeleton_pose: &pose,
-            time_s: t as f32,
-            skin_positions_world: &surface.positions_m,
-            skin_grid: (m, n),
-            vehicle_from_world: Pose::IDENTITY,
-            wand_physical: None,
-            screen_corners: [Vec3::ZERO; 4],
-            layers: Layers::default(),
-            skin_opacity: 1.0,
-        });
+        let scene = build_scene(&torso.inputs());
         let drawn = &scene.skin.expect("the skin is drawn").mesh.positions;
         assert_eq!(drawn.len(), smooth.len());
         assert!(drawn.iter().all(|p| p.is_finite()));
