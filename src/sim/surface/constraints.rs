@@ -81,7 +81,14 @@ struct PassScratch {
     moved_round: Vec<u8>,
     /// Last shape that moved each point and the direction it moved it (world).
     last_shape: Vec<u32>,
-    last_normal: Vec<Vec3>,
+    last_normal: [Vec<f32>; 3],
+    /// Velocity of the last moving shape's surface where it left each point (world, m/s,
+    /// SoA): eq. 13's reference, taken when the move is recorded.
+    surface_vel: [Vec<f32>; 3],
+    /// Per free point: the correction length eq. 13 applied and its largest component, or −1
+    /// where none was (scratch of [`apply_moves`]).
+    applied_m: Vec<f32>,
+    applied_component_m: Vec<f32>,
     /// Points moved this pass, each once.
     moved: Vec<u32>,
     /// Stage-one results along one run (1: a hit), padded to whole words of 8.
@@ -117,9 +124,11 @@ impl Broadphase {
     /// the last shape pushed it in (the muscle's outward normal there).
     pub fn last_moves(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
         let sc = &self.scratch;
-        sc.moved
-            .iter()
-            .map(|&f| (f as usize, sc.last_normal[f as usize]))
+        sc.moved.iter().map(|&f| {
+            let f = f as usize;
+            let n = &sc.last_normal;
+            (f, Vec3::new(n[0][f], n[1][f], n[2][f]))
+        })
     }
 }
 
@@ -215,7 +224,9 @@ impl Broadphase {
         sc.gate.resize(free, 0);
         sc.moved_round.resize(free, u8::MAX);
         sc.last_shape.resize(free, 0);
-        sc.last_normal.resize(free, Vec3::ZERO);
+        for c in sc.last_normal.iter_mut().chain(&mut sc.surface_vel) {
+            c.resize(free, 0.0);
+        }
         sc.ones.resize(free, 1);
         for c in &mut sc.q {
             c.resize(free, 0.0);
@@ -324,6 +335,11 @@ pub fn enforce(
     let free = m * (input.along - 2);
     let sc = &mut broad.scratch;
     touched.clear();
+    let inv_h = if input.h_s > 0.0 {
+        1.0 / input.h_s
+    } else {
+        0.0
+    };
     // Fat points r − τ n̂.
     for c in 0..3 {
         let (g, n, q) = (
@@ -402,11 +418,19 @@ pub fn enforce(
                     shape: s_idx as u32,
                     round: round as u8,
                 };
+                let motion = SurfaceMotion {
+                    shape: input
+                        .shapes_start
+                        .get(s_idx)
+                        .filter(|_| input.shapes_start.len() == shapes.len())
+                        .map(|start| (s, start)),
+                    inv_h,
+                };
                 changed += match s.geometry.primitive {
                     Primitive::Sphere { radius_m } if s.geometry.is_undeformed() => {
-                        sphere_stage(sc, runs, s, owed, radius_m)
+                        sphere_stage(sc, runs, s, owed, motion, radius_m)
                     }
-                    _ => general_stage(sc, runs, s, owed, broad.extents[s_idx]),
+                    _ => general_stage(sc, runs, s, owed, motion, broad.extents[s_idx]),
                 };
             }
             sc.active_runs = active;
@@ -420,113 +444,242 @@ pub fn enforce(
 
 /// Moves each skin point whose fat point the pass moved so that its fat point is where the
 /// pass left it (eq. 13a), and sets its velocity by eq. 13b-d relative to the surface of the
-/// shape that moved it last. Visits the free points in index order with every array sliced to
-/// the free points. The points moved by more than `input.recheck_m` go to `touched`.
+/// shape that moved it last (its velocity there was taken when the move was recorded). One
+/// vectorised pass over every free point with the unmoved ones masked out (most points move
+/// in a pass of resting skin), then a scan of the applied lengths for the report, in index
+/// order. The points moved by more than `input.recheck_m` go to `touched`.
 fn apply_moves(
     input: &ConstraintInput<'_>,
-    sc: &PassScratch,
+    sc: &mut PassScratch,
     grid: &mut [Vec<f32>; 3],
     normals: &[Vec<f32>; 3],
     x: &mut [f32],
     v: &mut [f32],
     touched: &mut Vec<u32>,
 ) -> ConstraintOutcome {
-    let shapes = input.shapes_end;
     let m = input.around;
     let free = m * (input.along - 2);
     let mut out = ConstraintOutcome::default();
-    let inv_h = if input.h_s > 0.0 {
-        1.0 / input.h_s
-    } else {
-        0.0
-    };
-    let same_shapes = input.shapes_start.len() == shapes.len();
     let [g0, g1, g2] = grid;
-    let (g0, g1, g2) = (
+    let [n0, n1, n2] = normals;
+    let (x0, rest) = x.split_at_mut(free);
+    let (x1, x2) = rest.split_at_mut(free);
+    let (v0, rest) = v.split_at_mut(free);
+    let (v1, v2) = rest.split_at_mut(free);
+    sc.applied_m.resize(free, -1.0);
+    sc.applied_component_m.resize(free, -1.0);
+    let [q0, q1, q2] = &sc.q;
+    let fat = &input.fat_m[..free];
+    eq13_positions(
+        &sc.moved_round[..free],
+        &q0[..free],
+        &q1[..free],
+        &q2[..free],
+        &n0[m..m + free],
+        &n1[m..m + free],
+        &n2[m..m + free],
+        fat,
         &mut g0[m..m + free],
         &mut g1[m..m + free],
         &mut g2[m..m + free],
+        x0,
+        x1,
+        &mut x2[..free],
+        &mut sc.applied_m[..free],
+        &mut sc.applied_component_m[..free],
     );
-    let [n0, n1, n2] = normals;
-    let (n0, n1, n2) = (&n0[m..m + free], &n1[m..m + free], &n2[m..m + free]);
-    let (q0, q1, q2) = (&sc.q[0][..free], &sc.q[1][..free], &sc.q[2][..free]);
-    let (x0, rest) = x.split_at_mut(free);
-    let (x1, x2) = rest.split_at_mut(free);
-    let x2 = &mut x2[..free];
-    let (v0, rest) = v.split_at_mut(free);
-    let (v1, v2) = rest.split_at_mut(free);
-    let v2 = &mut v2[..free];
-    let fat = &input.fat_m[..free];
-    let (moved_round, last_shapes) = (&sc.moved_round[..free], &sc.last_shape[..free]);
-    let last_normal = &sc.last_normal[..free];
-    for f in 0..free {
-        if moved_round[f] == u8::MAX {
+    let ([s0, s1, s2], [l0, l1, l2]) = (&sc.surface_vel, &sc.last_normal);
+    eq13_velocities(
+        &sc.applied_m[..free],
+        &s0[..free],
+        &s1[..free],
+        &s2[..free],
+        &l0[..free],
+        &l1[..free],
+        &l2[..free],
+        input.k_parallel,
+        input.k_perpendicular,
+        v0,
+        v1,
+        &mut v2[..free],
+    );
+    let applied = sc.applied_m[..free]
+        .iter()
+        .zip(&sc.applied_component_m[..free]);
+    for (f, (&len, &component)) in applied.enumerate() {
+        if len < 0.0 {
             continue;
         }
-        let p0 = Vec3::new(g0[f], g1[f], g2[f]);
-        let n = Vec3::new(n0[f], n1[f], n2[f]);
-        let q = Vec3::new(q0[f], q1[f], q2[f]);
-        let p1 = q + n * fat[f];
-        let d = p1 - p0;
-        let len = d.length();
-        if len.is_nan() || len <= 0.0 {
-            continue;
-        }
-        let last_shape = last_shapes[f] as usize;
-        out.max_component_m = out.max_component_m.max(d.abs().max_element());
+        out.max_component_m = out.max_component_m.max(component);
         if len > out.max_correction_m {
             out.max_correction_m = len;
-            out.worst = (f as u32, last_shape as u32);
+            out.worst = (f as u32, sc.last_shape[f]);
         }
         out.corrected += 1;
         if len > input.recheck_m {
             touched.push(f as u32);
         }
-        (x0[f], x1[f], x2[f]) = (p1.x, p1.y, p1.z);
-        (g0[f], g1[f], g2[f]) = (p1.x, p1.y, p1.z);
-        // Velocity relative to the muscle surface, eq. 13b-d: the surface point now at q was
-        // at start.world_from_shape(end.shape_from_world(q)) at the start of the step.
-        let surface_vel = match (same_shapes, input.shapes_start.get(last_shape)) {
-            (true, Some(start)) => {
-                let end = &shapes[last_shape];
-                let was = start
-                    .world_from_shape
-                    .transform_point3(end.shape_from_world.transform_point3(q));
-                (q - was) * inv_h
-            }
-            _ => Vec3::ZERO,
-        };
-        let normal = last_normal[f];
-        let vel = Vec3::new(v0[f], v1[f], v2[f]);
-        let rel = vel - surface_vel;
-        let vn = rel.dot(normal);
-        let normal_part = normal * vn;
-        let tangential = rel - normal_part;
-        let new_normal = if vn < 0.0 {
-            -input.k_parallel * normal_part
-        } else {
-            normal_part
-        };
-        let new_vel = surface_vel + new_normal + input.k_perpendicular * tangential;
-        (v0[f], v1[f], v2[f]) = (new_vel.x, new_vel.y, new_vel.z);
     }
     out
 }
 
+crate::sim::simd::multiversion! {
+    /// [`apply_moves`]' positions (eq. 13a) for every free point: where `moved_round` marks a
+    /// move and the correction `d = (q + τ n) − p` (`p` the grid point) has a length `> 0`, the
+    /// point (`g`, `x`) goes to `q + τ n`, `applied` gets `|d|` and `component` `max_i |d_i|`;
+    /// elsewhere nothing moves and both get −1. Every slice is its own argument, so the
+    /// compiler knows they do not overlap and vectorises the loop.
+    fn eq13_positions(
+        moved_round: &[u8],
+        q0: &[f32],
+        q1: &[f32],
+        q2: &[f32],
+        n0: &[f32],
+        n1: &[f32],
+        n2: &[f32],
+        fat: &[f32],
+        g0: &mut [f32],
+        g1: &mut [f32],
+        g2: &mut [f32],
+        x0: &mut [f32],
+        x1: &mut [f32],
+        x2: &mut [f32],
+        applied: &mut [f32],
+        component: &mut [f32],
+    ) {
+        let len = moved_round.len().min(fat.len()).min(applied.len()).min(component.len());
+        let (moved_round, fat) = (&moved_round[..len], &fat[..len]);
+        let (q0, q1, q2) = (&q0[..len], &q1[..len], &q2[..len]);
+        let (n0, n1, n2) = (&n0[..len], &n1[..len], &n2[..len]);
+        let (g0, g1, g2) = (&mut g0[..len], &mut g1[..len], &mut g2[..len]);
+        let (x0, x1, x2) = (&mut x0[..len], &mut x1[..len], &mut x2[..len]);
+        let (applied, component) = (&mut applied[..len], &mut component[..len]);
+        for f in 0..len {
+            let (px, py, pz) = (
+                q0[f] + n0[f] * fat[f],
+                q1[f] + n1[f] * fat[f],
+                q2[f] + n2[f] * fat[f],
+            );
+            let (dx, dy, dz) = (px - g0[f], py - g1[f], pz - g2[f]);
+            let d_len = (dx * dx + dy * dy + dz * dz).sqrt();
+            // Not moved, or a correction of zero or NaN length: nothing changes.
+            let ok = (moved_round[f] != u8::MAX) & (d_len > 0.0);
+            applied[f] = if ok { d_len } else { -1.0 };
+            let largest = dx.abs().max(dy.abs()).max(dz.abs());
+            component[f] = if ok { largest } else { -1.0 };
+            g0[f] = if ok { px } else { g0[f] };
+            g1[f] = if ok { py } else { g1[f] };
+            g2[f] = if ok { pz } else { g2[f] };
+            x0[f] = if ok { px } else { x0[f] };
+            x1[f] = if ok { py } else { x1[f] };
+            x2[f] = if ok { pz } else { x2[f] };
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// [`apply_moves`]' velocities (eq. 13b-d) where `applied ≥ 0`: relative to the muscle
+    /// surface's velocity `s`, the normal part along the unit `l` is reversed and scaled by
+    /// k∥ if it points into the muscle (kept otherwise), the tangential part scaled by k⊥.
+    fn eq13_velocities(
+        applied: &[f32],
+        s0: &[f32],
+        s1: &[f32],
+        s2: &[f32],
+        l0: &[f32],
+        l1: &[f32],
+        l2: &[f32],
+        k_parallel: f32,
+        k_perpendicular: f32,
+        v0: &mut [f32],
+        v1: &mut [f32],
+        v2: &mut [f32],
+    ) {
+        let len = applied.len();
+        let (s0, s1, s2) = (&s0[..len], &s1[..len], &s2[..len]);
+        let (l0, l1, l2) = (&l0[..len], &l1[..len], &l2[..len]);
+        let (v0, v1, v2) = (&mut v0[..len], &mut v1[..len], &mut v2[..len]);
+        for f in 0..len {
+            let ok = applied[f] >= 0.0;
+            let (lx, ly, lz) = (l0[f], l1[f], l2[f]);
+            let (sx, sy, sz) = (s0[f], s1[f], s2[f]);
+            let (rx, ry, rz) = (v0[f] - sx, v1[f] - sy, v2[f] - sz);
+            let vn = rx * lx + ry * ly + rz * lz;
+            let (nx, ny, nz) = (lx * vn, ly * vn, lz * vn);
+            let (tx, ty, tz) = (rx - nx, ry - ny, rz - nz);
+            let into = vn < 0.0;
+            let (ax, ay, az) = if into {
+                (-k_parallel * nx, -k_parallel * ny, -k_parallel * nz)
+            } else {
+                (nx, ny, nz)
+            };
+            let (wx, wy, wz) = (
+                sx + ax + k_perpendicular * tx,
+                sy + ay + k_perpendicular * ty,
+                sz + az + k_perpendicular * tz,
+            );
+            v0[f] = if ok { wx } else { v0[f] };
+            v1[f] = if ok { wy } else { v1[f] };
+            v2[f] = if ok { wz } else { v2[f] };
+        }
+    }
+}
+
+/// How the surface of the shape taking its turn moved over the step, for eq. 13's relative
+/// velocity.
+#[derive(Clone, Copy)]
+struct SurfaceMotion<'a> {
+    /// The shape at the end and at the start of the step; `None` when the step's shapes differ
+    /// (a character edit), and the surface then counts as still.
+    shape: Option<(&'a ShapeInstance, &'a ShapeInstance)>,
+    /// 1 / step length, 1/s (0 for an empty step).
+    inv_h: f32,
+}
+
+impl SurfaceMotion<'_> {
+    /// Velocity of the surface point now at `q` (world): it was at
+    /// `start.world_from_shape(end.shape_from_world(q))` at the start of the step.
+    #[inline]
+    fn velocity_at(&self, q: Vec3) -> Vec3 {
+        match self.shape {
+            Some((end, start)) => {
+                let was = start
+                    .world_from_shape
+                    .transform_point3(end.shape_from_world.transform_point3(q));
+                (q - was) * self.inv_h
+            }
+            None => Vec3::ZERO,
+        }
+    }
+}
+
 /// Records that `f` was moved by `d` (world, along the unit `normal`) by `by`'s shape in its
-/// round.
+/// round, and the velocity of that shape's surface where it left the point.
 #[inline(always)]
-fn record_move(sc: &mut PassScratch, f: usize, d: Vec3, normal: Vec3, by: Owed) {
+fn record_move(
+    sc: &mut PassScratch,
+    f: usize,
+    d: Vec3,
+    normal: Vec3,
+    by: Owed,
+    motion: SurfaceMotion<'_>,
+) {
     let (s_idx, round) = (by.shape, by.round);
     sc.q[0][f] += d.x;
     sc.q[1][f] += d.y;
     sc.q[2][f] += d.z;
+    let surface = motion.velocity_at(Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]));
+    sc.surface_vel[0][f] = surface.x;
+    sc.surface_vel[1][f] = surface.y;
+    sc.surface_vel[2][f] = surface.z;
     if sc.moved_round[f] == u8::MAX {
         sc.moved.push(f as u32);
     }
     sc.moved_round[f] = round;
     sc.last_shape[f] = s_idx;
-    sc.last_normal[f] = normal;
+    sc.last_normal[0][f] = normal.x;
+    sc.last_normal[1][f] = normal.y;
+    sc.last_normal[2][f] = normal.z;
 }
 
 /// An undeformed sphere: exact test and projection over the runs. Returns the points moved.
@@ -535,6 +688,7 @@ fn sphere_stage(
     runs: &[(u32, u32)],
     s: &ShapeInstance,
     owed: Owed,
+    motion: SurfaceMotion<'_>,
     radius_m: f32,
 ) -> usize {
     let c = Vec3::from(s.world_from_shape.translation);
@@ -562,7 +716,7 @@ fn sphere_stage(
             if !delta.is_finite() || delta.length_squared() <= SETTLED_M * SETTLED_M {
                 continue;
             }
-            record_move(sc, f, delta, dir, owed);
+            record_move(sc, f, delta, dir, owed, motion);
             moved += 1;
         }
         sc.hit_index = found;
@@ -577,6 +731,7 @@ fn general_stage(
     runs: &[(u32, u32)],
     s: &ShapeInstance,
     owed: Owed,
+    motion: SurfaceMotion<'_>,
     extent: Vec3,
 ) -> usize {
     let t = &s.shape_from_world;
@@ -636,7 +791,7 @@ fn general_stage(
             outward(geometry, s, on_surface)
         };
         let f = sc.project.point[i] as usize;
-        record_move(sc, f, d, normal, owed);
+        record_move(sc, f, d, normal, owed, motion);
         moved += 1;
     }
     moved
