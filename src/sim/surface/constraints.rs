@@ -89,6 +89,8 @@ struct PassScratch {
     /// where none was (scratch of [`apply_moves`]).
     applied_m: Vec<f32>,
     applied_component_m: Vec<f32>,
+    /// The moved points in index order (scratch of [`apply_moves`]' sparse path).
+    moved_sorted: Vec<u32>,
     /// Points moved this pass, each once.
     moved: Vec<u32>,
     /// Stage-one results along one run (1: a hit), padded to whole words of 8.
@@ -466,10 +468,51 @@ fn apply_moves(
     let (x1, x2) = rest.split_at_mut(free);
     let (v0, rest) = v.split_at_mut(free);
     let (v1, v2) = rest.split_at_mut(free);
-    sc.applied_m.resize(free, -1.0);
-    sc.applied_component_m.resize(free, -1.0);
     let [q0, q1, q2] = &sc.q;
     let fat = &input.fat_m[..free];
+    if sc.moved.len() * DENSE_MOVES < free {
+        // Few moved points (re-checks): point by point, in index order, the same arithmetic.
+        let mut order = std::mem::take(&mut sc.moved_sorted);
+        order.clone_from(&sc.moved);
+        order.sort_unstable();
+        let (g, n, [s0, s1, s2], [l0, l1, l2]) =
+            ([g0, g1, g2], [n0, n1, n2], &sc.surface_vel, &sc.last_normal);
+        for &f in &order {
+            let f = f as usize;
+            let k = m + f;
+            let (p, len, component) = eq13_position(
+                [q0[f], q1[f], q2[f]],
+                [n[0][k], n[1][k], n[2][k]],
+                fat[f],
+                [g[0][k], g[1][k], g[2][k]],
+            );
+            if len.is_nan() || len <= 0.0 {
+                continue;
+            }
+            (g[0][k], g[1][k], g[2][k]) = (p[0], p[1], p[2]);
+            (x0[f], x1[f], x2[f]) = (p[0], p[1], p[2]);
+            let w = eq13_velocity(
+                [v0[f], v1[f], v2[f]],
+                [s0[f], s1[f], s2[f]],
+                [l0[f], l1[f], l2[f]],
+                input.k_parallel,
+                input.k_perpendicular,
+            );
+            (v0[f], v1[f], v2[f]) = (w[0], w[1], w[2]);
+            out.report(
+                f,
+                len,
+                component,
+                sc.last_shape[f],
+                input.recheck_m,
+                touched,
+            );
+        }
+        sc.moved_sorted = order;
+        return out;
+    }
+    sc.applied_m.resize(free, -1.0);
+    sc.applied_component_m.resize(free, -1.0);
     eq13_positions(
         &sc.moved_round[..free],
         &q0[..free],
@@ -507,20 +550,80 @@ fn apply_moves(
         .iter()
         .zip(&sc.applied_component_m[..free]);
     for (f, (&len, &component)) in applied.enumerate() {
-        if len < 0.0 {
-            continue;
-        }
-        out.max_component_m = out.max_component_m.max(component);
-        if len > out.max_correction_m {
-            out.max_correction_m = len;
-            out.worst = (f as u32, sc.last_shape[f]);
-        }
-        out.corrected += 1;
-        if len > input.recheck_m {
-            touched.push(f as u32);
+        if len >= 0.0 {
+            out.report(
+                f,
+                len,
+                component,
+                sc.last_shape[f],
+                input.recheck_m,
+                touched,
+            );
         }
     }
     out
+}
+
+/// [`apply_moves`] runs its vectorised passes over every free point when at least one in this
+/// many moved (a first pass over resting skin moves two of three), and visits the moved points
+/// one by one otherwise (a re-check moves a few dozen).
+const DENSE_MOVES: usize = 4;
+
+impl ConstraintOutcome {
+    /// Takes in a correction of length `len` (and largest component `component`, metres) that
+    /// eq. 13 applied to free point `f`, last moved by shape `shape`; the points are reported
+    /// in index order. A correction longer than `recheck_m` puts the point in `touched`.
+    #[inline(always)]
+    fn report(
+        &mut self,
+        f: usize,
+        len: f32,
+        component: f32,
+        shape: u32,
+        recheck_m: f32,
+        touched: &mut Vec<u32>,
+    ) {
+        self.max_component_m = self.max_component_m.max(component);
+        if len > self.max_correction_m {
+            self.max_correction_m = len;
+            self.worst = (f as u32, shape);
+        }
+        self.corrected += 1;
+        if len > recheck_m {
+            touched.push(f as u32);
+        }
+    }
+}
+
+/// Eq. 13a for one point: the skin point `q + τ n` for the fat point `q` the pass left, the
+/// length of its correction from `p0` and that correction's largest component (metres).
+#[inline(always)]
+fn eq13_position(q: [f32; 3], n: [f32; 3], fat: f32, p0: [f32; 3]) -> ([f32; 3], f32, f32) {
+    let p = [q[0] + n[0] * fat, q[1] + n[1] * fat, q[2] + n[2] * fat];
+    let (dx, dy, dz) = (p[0] - p0[0], p[1] - p0[1], p[2] - p0[2]);
+    let len = (dx * dx + dy * dy + dz * dz).sqrt();
+    (p, len, dx.abs().max(dy.abs()).max(dz.abs()))
+}
+
+/// Eq. 13b-d for one point: the velocity `v` relative to the muscle surface's `s`, its part
+/// along the unit normal `l` reversed and scaled by k∥ if it points into the muscle (kept
+/// otherwise), the tangential part scaled by k⊥.
+#[inline(always)]
+fn eq13_velocity(v: [f32; 3], s: [f32; 3], l: [f32; 3], k_par: f32, k_perp: f32) -> [f32; 3] {
+    let (rx, ry, rz) = (v[0] - s[0], v[1] - s[1], v[2] - s[2]);
+    let vn = rx * l[0] + ry * l[1] + rz * l[2];
+    let (nx, ny, nz) = (l[0] * vn, l[1] * vn, l[2] * vn);
+    let (tx, ty, tz) = (rx - nx, ry - ny, rz - nz);
+    let (ax, ay, az) = if vn < 0.0 {
+        (-k_par * nx, -k_par * ny, -k_par * nz)
+    } else {
+        (nx, ny, nz)
+    };
+    [
+        s[0] + ax + k_perp * tx,
+        s[1] + ay + k_perp * ty,
+        s[2] + az + k_perp * tz,
+    ]
 }
 
 crate::sim::simd::multiversion! {
@@ -555,24 +658,22 @@ crate::sim::simd::multiversion! {
         let (x0, x1, x2) = (&mut x0[..len], &mut x1[..len], &mut x2[..len]);
         let (applied, component) = (&mut applied[..len], &mut component[..len]);
         for f in 0..len {
-            let (px, py, pz) = (
-                q0[f] + n0[f] * fat[f],
-                q1[f] + n1[f] * fat[f],
-                q2[f] + n2[f] * fat[f],
+            let (p, d_len, largest) = eq13_position(
+                [q0[f], q1[f], q2[f]],
+                [n0[f], n1[f], n2[f]],
+                fat[f],
+                [g0[f], g1[f], g2[f]],
             );
-            let (dx, dy, dz) = (px - g0[f], py - g1[f], pz - g2[f]);
-            let d_len = (dx * dx + dy * dy + dz * dz).sqrt();
             // Not moved, or a correction of zero or NaN length: nothing changes.
             let ok = (moved_round[f] != u8::MAX) & (d_len > 0.0);
             applied[f] = if ok { d_len } else { -1.0 };
-            let largest = dx.abs().max(dy.abs()).max(dz.abs());
             component[f] = if ok { largest } else { -1.0 };
-            g0[f] = if ok { px } else { g0[f] };
-            g1[f] = if ok { py } else { g1[f] };
-            g2[f] = if ok { pz } else { g2[f] };
-            x0[f] = if ok { px } else { x0[f] };
-            x1[f] = if ok { py } else { x1[f] };
-            x2[f] = if ok { pz } else { x2[f] };
+            g0[f] = if ok { p[0] } else { g0[f] };
+            g1[f] = if ok { p[1] } else { g1[f] };
+            g2[f] = if ok { p[2] } else { g2[f] };
+            x0[f] = if ok { p[0] } else { x0[f] };
+            x1[f] = if ok { p[1] } else { x1[f] };
+            x2[f] = if ok { p[2] } else { x2[f] };
         }
     }
 }
@@ -601,26 +702,16 @@ crate::sim::simd::multiversion! {
         let (v0, v1, v2) = (&mut v0[..len], &mut v1[..len], &mut v2[..len]);
         for f in 0..len {
             let ok = applied[f] >= 0.0;
-            let (lx, ly, lz) = (l0[f], l1[f], l2[f]);
-            let (sx, sy, sz) = (s0[f], s1[f], s2[f]);
-            let (rx, ry, rz) = (v0[f] - sx, v1[f] - sy, v2[f] - sz);
-            let vn = rx * lx + ry * ly + rz * lz;
-            let (nx, ny, nz) = (lx * vn, ly * vn, lz * vn);
-            let (tx, ty, tz) = (rx - nx, ry - ny, rz - nz);
-            let into = vn < 0.0;
-            let (ax, ay, az) = if into {
-                (-k_parallel * nx, -k_parallel * ny, -k_parallel * nz)
-            } else {
-                (nx, ny, nz)
-            };
-            let (wx, wy, wz) = (
-                sx + ax + k_perpendicular * tx,
-                sy + ay + k_perpendicular * ty,
-                sz + az + k_perpendicular * tz,
+            let w = eq13_velocity(
+                [v0[f], v1[f], v2[f]],
+                [s0[f], s1[f], s2[f]],
+                [l0[f], l1[f], l2[f]],
+                k_parallel,
+                k_perpendicular,
             );
-            v0[f] = if ok { wx } else { v0[f] };
-            v1[f] = if ok { wy } else { v1[f] };
-            v2[f] = if ok { wz } else { v2[f] };
+            v0[f] = if ok { w[0] } else { v0[f] };
+            v1[f] = if ok { w[1] } else { v1[f] };
+            v2[f] = if ok { w[2] } else { v2[f] };
         }
     }
 }
