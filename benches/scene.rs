@@ -12,7 +12,8 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use leman::app::scene::{BentTorso, build_scene};
-use leman::app::skin_display::{keep_outside, resample_field};
+use leman::app::skin_display::keep_outside;
+use leman::character::resample::resample_field;
 use leman::render::subdivide;
 
 fn scene(c: &mut Criterion) {
@@ -25,16 +26,10 @@ fn scene(c: &mut Criterion) {
     let (m, n) = torso.skin_grid;
     let level = subdivide::display_level(m);
     let (rm, rn) = subdivide::refined_size(m, n, level);
-    let (rm, rn) = (rm as usize, rn as usize);
     let refined = subdivide::refine_skin_grid(&torso.skin_positions_world, m, n, level);
     let skin = &torso.character.skin;
-    let fat = resample_field(
-        &skin.fat_m,
-        skin.around as usize,
-        skin.along as usize,
-        rm,
-        rn,
-    );
+    let fat = resample_field(&skin.fat_m, skin.around, skin.along, rm, rn);
+    let (rm, rn) = (rm as usize, rn as usize);
     let shapes = torso.shapes();
     c.bench_function("torso_bent/keep_outside", |b| {
         b.iter(|| {

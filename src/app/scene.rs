@@ -8,6 +8,7 @@
 //! apply unchanged.
 
 use crate::app::skin_display;
+use crate::character::resample::resample_field;
 use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
 use crate::pose::Pose;
 use crate::render::adapter::{TessellationDetail, kind_from_name, tessellate_primitive};
@@ -121,13 +122,8 @@ pub fn build_scene(inputs: &SceneInputs<'_>) -> Scene {
             // Unrefined (64 points around or more), the drawn points are the simulated ones,
             // which the simulation keeps outside, and the chords between them are short.
             if level > 1 {
-                let fat = skin_display::resample_field(
-                    &character.skin.fat_m,
-                    character.skin.around as usize,
-                    character.skin.along as usize,
-                    rm as usize,
-                    rn as usize,
-                );
+                let skin = &character.skin;
+                let fat = resample_field(&skin.fat_m, skin.around, skin.along, rm, rn);
                 let (rm, rn) = (rm as usize, rn as usize);
                 skin_display::keep_outside(&mut refined, rm, rn, &fat, &instances);
             }

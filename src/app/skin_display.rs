@@ -8,14 +8,16 @@
 //! display point whose fat point lies inside a shape is moved out the way the simulation moves
 //! its points: the fat point goes to the shape's surface (the simulation's batched sign and
 //! gradient kernels, Newton steps along the gradient) and the skin point sits `τ` outside it
-//! along the display surface's normal. This is for display only: the simulated state, the forces and
-//! picking are untouched.
+//! along the display surface's normal. This is for display only: the simulated state, the
+//! forces and picking are untouched.
 //!
-//! Fat is given on the character's skin grid; the display grid takes it by bilinear
-//! interpolation (as the simulation does when it resamples a skin, LEMAN 6.5), so it follows the
-//! model at any resolution.
+//! Fat is given on the character's skin grid; the display grid takes it by the bilinear
+//! interpolation the simulation uses when it resamples a skin
+//! ([`crate::character::resample::resample_field`], LEMAN 6.5), so it follows the model at any
+//! resolution.
 
 use crate::character::ShapeInstance;
+use crate::sim::surface::forces;
 use crate::sim::surface::kernels::Batch;
 use glam::Vec3;
 
@@ -25,52 +27,19 @@ const ROUNDS: usize = 2;
 /// Newton steps of the display projection.
 const NEWTON_STEPS: usize = 2;
 
-/// A per-point field of an `m × n` skin grid (periodic around, index `j · m + i`) sampled
-/// bilinearly on an `rm × rn` grid over the same surface (same parameter ranges: around
-/// `[0, 1)` periodic, along `[0, 1]`). Returns `rm · rn` zeros when `values` does not fit
-/// `m × n`.
-pub fn resample_field(values: &[f32], m: usize, n: usize, rm: usize, rn: usize) -> Vec<f32> {
-    if m == 0 || n == 0 || values.len() != m * n {
-        return vec![0.0; rm * rn];
-    }
-    let mut out = Vec::with_capacity(rm * rn);
-    for j in 0..rn {
-        let v = if rn > 1 {
-            j as f32 * (n - 1) as f32 / (rn - 1) as f32
-        } else {
-            0.0
-        };
-        let j0 = (v.floor() as usize).min(n - 1);
-        let j1 = (j0 + 1).min(n - 1);
-        let tv = v - j0 as f32;
-        for i in 0..rm {
-            let u = i as f32 * m as f32 / rm.max(1) as f32;
-            let i0 = (u.floor() as usize) % m;
-            let i1 = (i0 + 1) % m;
-            let tu = u - u.floor();
-            let row = |jj: usize| values[jj * m + i0] * (1.0 - tu) + values[jj * m + i1] * tu;
-            out.push(row(j0) * (1.0 - tv) + row(j1) * tv);
-        }
-    }
-    out
-}
-
-/// Unit normals of an `around × along` grid of points (central differences, periodic around,
-/// one-sided at the end rows), oriented as the skin's `∂r/∂u₂ × ∂r/∂u₁` (outward for the
-/// skin's point order). A degenerate point gets the zero vector.
+/// Unit outward normals of an `around × along` grid of points by the simulation's own
+/// definition ([`forces::grid_normals`]: central differences, periodic around, one-sided at the
+/// end rows, `∂r/∂u₂ × ∂r/∂u₁`; +Y where degenerate).
 fn grid_normals(points: &[Vec3], around: usize, along: usize) -> Vec<Vec3> {
-    let at = |i: usize, j: usize| points[j * around + i];
-    let mut normals = Vec::with_capacity(points.len());
-    for j in 0..along {
-        let (below, above) = (j.saturating_sub(1), (j + 1).min(along - 1));
-        for i in 0..around {
-            let (left, right) = ((i + around - 1) % around, (i + 1) % around);
-            let du1 = at(right, j) - at(left, j);
-            let du2 = at(i, above) - at(i, below);
-            normals.push(du2.cross(du1).normalize_or_zero());
-        }
-    }
-    normals
+    let grid = [0, 1, 2].map(|c| points.iter().map(|p| p[c]).collect::<Vec<f32>>());
+    let mut normals: [Vec<f32>; 3] = Default::default();
+    forces::grid_normals(around, along, &grid, &mut normals);
+    let [nx, ny, nz] = &normals;
+    nx.iter()
+        .zip(ny)
+        .zip(nz)
+        .map(|((x, y), z)| Vec3::new(*x, *y, *z))
+        .collect()
 }
 
 /// Moves the display points of an `around × along` grid (periodic around) whose fat points
@@ -104,7 +73,7 @@ pub fn keep_outside(
         let (n, fat) = (normals[k], fat_m[k].max(0.0));
         let o = n * fat;
         let fat_point = points[k] - o;
-        let usable = n != Vec3::ZERO && fat.is_finite() && fat_point.is_finite();
+        let usable = fat.is_finite() && fat_point.is_finite();
         offset.push(if usable { o } else { Vec3::NAN });
         q.push(fat_point);
     }
@@ -154,27 +123,13 @@ pub fn keep_outside(
                 continue;
             }
             test.evaluate(&s.geometry, false);
-            inside.clear();
-            for i in 0..test.len() {
-                if test.value[i] < 0.0 {
-                    inside.push(test.point[i], test.position(i));
-                }
-            }
+            inside.assign_inside_of(&test);
             if inside.is_empty() {
                 continue;
             }
             for _ in 0..NEWTON_STEPS {
                 inside.evaluate(&s.geometry, true);
-                for i in 0..inside.len() {
-                    let (v, g) = (inside.value[i], inside.gradient(i));
-                    let len2 = g.length_squared();
-                    if len2 > 1e-12 && len2.is_finite() && v.is_finite() {
-                        let p = inside.position(i) - g * (v / len2);
-                        for c in 0..3 {
-                            inside.p[c][i] = p[c];
-                        }
-                    }
-                }
+                inside.newton_step();
             }
             for i in 0..inside.len() {
                 let world = s.world_from_shape.transform_point3(inside.position(i));
@@ -332,7 +287,7 @@ mod tests {
         let shapes = [sphere(Vec3::ZERO, 0.105)];
         keep_outside(&mut p, 8, 5, &fat, &shapes);
         for (k, q) in p.iter().enumerate() {
-            // The NaN point and its neighbours (whose normals it spoils) stay as they were.
+            // Only the NaN point itself stays non-finite.
             if k != 17 {
                 assert!(q.is_finite(), "point {k}: {q}");
             }
@@ -343,24 +298,5 @@ mod tests {
         let before = q.clone();
         assert_eq!(keep_outside(&mut q, 8, 5, &fat[..3], &shapes), 0);
         assert_eq!(q, before);
-    }
-
-    #[test]
-    fn resampled_fat_keeps_the_grid_values_and_interpolates_between() {
-        let (m, n) = (4usize, 3usize);
-        let values: Vec<f32> = (0..m * n).map(|k| k as f32).collect();
-        // The same grid: unchanged.
-        assert_eq!(resample_field(&values, m, n, m, n), values);
-        // Twice as fine: grid values kept, midpoints averaged (wrapping around).
-        let fine = resample_field(&values, m, n, 2 * m, 2 * n - 1);
-        assert_eq!(fine.len(), 8 * 5);
-        assert_eq!(fine[0], 0.0);
-        assert_eq!(fine[2], 1.0);
-        assert_eq!(fine[1], 0.5);
-        assert_eq!(fine[7], 1.5, "between point 3 and point 0 around");
-        assert_eq!(fine[8], 2.0, "half way between rows 0 and 1");
-        assert_eq!(fine[4 * 8 + 6], values[2 * m + 3]);
-        // A field that does not fit gives zeros.
-        assert_eq!(resample_field(&values[..5], m, n, 2, 2), vec![0.0; 4]);
     }
 }

@@ -76,6 +76,48 @@ impl Mix for Sym2 {
     }
 }
 
+/// `values` on a grid `around` points around (index `j · around + i`) sampled at the new grid's
+/// coordinates `li` (around) and `lj` (along).
+fn grid<T: Mix>(values: &[T], around: u32, li: &[Lerp], lj: &[Lerp]) -> Vec<T> {
+    let index = |i: u32, j: u32| (j as usize) * (around as usize) + (i % around.max(1)) as usize;
+    let mut out = Vec::with_capacity(li.len() * lj.len());
+    for b in lj {
+        for a in li {
+            let v = |i: u32, j: u32| values[index(i, j)];
+            let lo = T::mix(v(a.lo, b.lo), v(a.hi, b.lo), a.w);
+            let hi = T::mix(v(a.lo, b.hi), v(a.hi, b.hi), a.w);
+            out.push(T::mix(lo, hi, b.w));
+        }
+    }
+    out
+}
+
+/// A per-point field of an `around × along` skin grid (index `j · around + i`) resampled to
+/// `new_around × new_along` points the way [`Character::with_resolution`] resamples the skin's
+/// own values: bilinear in material coordinates, periodic around, clamped along, and exact at
+/// the points the two grids share. Zeros when `values` does not have `around · along` entries
+/// or a grid has no points around or fewer than two rows (the new one) or none (the old one).
+pub fn resample_field(
+    values: &[f32],
+    around: u32,
+    along: u32,
+    new_around: u32,
+    new_along: u32,
+) -> Vec<f32> {
+    let new_len = new_around as usize * new_along as usize;
+    let fits = around > 0 && along > 0 && new_around > 0 && new_along >= 2;
+    if !fits || values.len() != around as usize * along as usize {
+        return vec![0.0; new_len];
+    }
+    let li: Vec<Lerp> = (0..new_around)
+        .map(|i| around_lerp(i, new_around, around))
+        .collect();
+    let lj: Vec<Lerp> = (0..new_along)
+        .map(|j| along_lerp(j, new_along, along))
+        .collect();
+    grid(values, around, &li, &lj)
+}
+
 impl Character {
     /// This character with its skin resampled to `around × along` points (see the module
     /// docs). The skeleton, shapes, motions and defaults are unchanged.
@@ -96,18 +138,6 @@ impl Character {
         let li: Vec<Lerp> = (0..around).map(|i| around_lerp(i, around, m0)).collect();
         let lj: Vec<Lerp> = (0..along).map(|j| along_lerp(j, along, n0)).collect();
 
-        fn grid<T: Mix>(old: &Skin, values: &[T], li: &[Lerp], lj: &[Lerp]) -> Vec<T> {
-            let mut out = Vec::with_capacity(li.len() * lj.len());
-            for b in lj {
-                for a in li {
-                    let v = |i: u32, j: u32| values[old.index(i, j)];
-                    let lo = T::mix(v(a.lo, b.lo), v(a.hi, b.lo), a.w);
-                    let hi = T::mix(v(a.lo, b.hi), v(a.hi, b.hi), a.w);
-                    out.push(T::mix(lo, hi, b.w));
-                }
-            }
-            out
-        }
         let ring = |values: &[Vec3]| -> Vec<Vec3> {
             li.iter()
                 .map(|a| Vec3::mix(values[a.lo as usize], values[a.hi as usize], a.w))
@@ -121,19 +151,19 @@ impl Character {
             top_joint: old.top_joint,
             bottom_ring_m: ring(&old.bottom_ring_m),
             top_ring_m: ring(&old.top_ring_m),
-            positions_m: grid(old, &old.positions_m, &li, &lj),
-            mass_kg: grid(old, &old.mass_kg, &li, &lj)
+            positions_m: grid(&old.positions_m, m0, &li, &lj),
+            mass_kg: grid(&old.mass_kg, m0, &li, &lj)
                 .into_iter()
                 .map(|m| m * scale)
                 .collect(),
-            damping_n_s_per_m: grid(old, &old.damping_n_s_per_m, &li, &lj)
+            damping_n_s_per_m: grid(&old.damping_n_s_per_m, m0, &li, &lj)
                 .into_iter()
                 .map(|d| d * scale)
                 .collect(),
-            rest_metric: grid(old, &old.rest_metric, &li, &lj),
-            stretch: grid(old, &old.stretch, &li, &lj),
-            bending: grid(old, &old.bending, &li, &lj),
-            fat_m: grid(old, &old.fat_m, &li, &lj),
+            rest_metric: grid(&old.rest_metric, m0, &li, &lj),
+            stretch: grid(&old.stretch, m0, &li, &lj),
+            bending: grid(&old.bending, m0, &li, &lj),
+            fat_m: grid(&old.fat_m, m0, &li, &lj),
         };
         // Fixed rows exactly where their joints put them.
         let pose = self
@@ -160,10 +190,10 @@ impl Character {
         let field = |g: fn(&TissueSpring) -> f32| -> Vec<f32> {
             first.iter().map(|s| s.map(g).unwrap_or(0.0)).collect()
         };
-        let has = grid(old, &field(|_| 1.0), &li, &lj);
-        let ks = grid(old, &field(|s| s.stiffness_n_per_m), &li, &lj);
-        let kd = grid(old, &field(|s| s.damping_n_s_per_m), &li, &lj);
-        let rest = grid(old, &field(|s| s.rest_length_m), &li, &lj);
+        let has = grid(&field(|_| 1.0), m0, &li, &lj);
+        let ks = grid(&field(|s| s.stiffness_n_per_m), m0, &li, &lj);
+        let kd = grid(&field(|s| s.damping_n_s_per_m), m0, &li, &lj);
+        let rest = grid(&field(|s| s.rest_length_m), m0, &li, &lj);
 
         let mut resampled = Character {
             name: self.name.clone(),

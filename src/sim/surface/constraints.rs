@@ -851,13 +851,7 @@ fn general_stage(
     // (usually one step: a step's penetration is shallow) or the steps run out.
     sc.project.evaluate(geometry, true);
     for _ in 0..NEWTON_STEPS {
-        let n = sc.project.len();
-        let batch = &mut sc.project;
-        let [px, py, pz] = &mut batch.p;
-        let [gx, gy, gz] = &batch.grad;
-        let (px, py, pz) = (&mut px[..n], &mut py[..n], &mut pz[..n]);
-        let all_converged = newton_steps(px, py, pz, &batch.value[..n], gx, gy, gz);
-        if all_converged {
+        if sc.project.newton_step() {
             break;
         }
         sc.project.evaluate(geometry, true);
@@ -1071,44 +1065,12 @@ crate::sim::simd::multiversion! {
     }
 }
 
-/// Whether `F`/`|∇F|` (a first-order distance) is within [`PROJECTION_TOLERANCE_M`].
+/// Whether `F`/`|∇F|` (a first-order distance) is within [`PROJECTION_TOLERANCE_M`]: the
+/// test [`Batch::newton_step`] makes with the same arithmetic.
 #[inline]
 fn on_surface(value: f32, grad: Vec3) -> bool {
     let glen = grad.length();
     glen > 0.0 && value.abs() <= PROJECTION_TOLERANCE_M * glen
-}
-
-crate::sim::simd::multiversion! {
-    /// One Newton step towards `F = 0` along the gradient, `p ← p − F ∇F/|∇F|²`, for every
-    /// entry (SoA positions, values and gradients; entries whose gradient is degenerate or
-    /// whose numbers are not finite stay). Returns whether every entry was already on the
-    /// surface before its step ([`on_surface`], the same arithmetic).
-    fn newton_steps(
-        px: &mut [f32],
-        py: &mut [f32],
-        pz: &mut [f32],
-        value: &[f32],
-        gx: &[f32],
-        gy: &[f32],
-        gz: &[f32],
-    ) -> bool {
-        let n = px.len().min(py.len()).min(pz.len()).min(value.len());
-        let n = n.min(gx.len()).min(gy.len()).min(gz.len());
-        let mut all_converged = true;
-        for i in 0..n {
-            let (x, y, z, v) = (gx[i], gy[i], gz[i], value[i]);
-            let len2 = x * x + y * y + z * z;
-            let glen = len2.sqrt();
-            all_converged &= (glen > 0.0) & (v.abs() <= PROJECTION_TOLERANCE_M * glen);
-            let step = (len2 > 1e-12) & v.is_finite() & len2.is_finite();
-            let k = v / len2;
-            let (nx, ny, nz) = (px[i] - x * k, py[i] - y * k, pz[i] - z * k);
-            px[i] = if step { nx } else { px[i] };
-            py[i] = if step { ny } else { py[i] };
-            pz[i] = if step { nz } else { pz[i] };
-        }
-        all_converged
-    }
 }
 
 /// Outward unit normal of a shape at a surface point, world.

@@ -10,7 +10,7 @@ use glam::Vec3;
 
 use super::fastmath::{atan2, pow0, sin_cos};
 use crate::character::shape::{MIN_CURVATURE_PER_M, MIN_TAPER_SCALE};
-use crate::character::{Primitive, Resolved, ShapeGeometry};
+use crate::character::{PROJECTION_TOLERANCE_M, Primitive, Resolved, ShapeGeometry};
 
 /// Points in one shape's frame (structure of arrays) with their values and gradients.
 #[derive(Debug, Clone, Default)]
@@ -91,6 +91,19 @@ impl Batch {
         for c in &mut self.p {
             c.truncate(k);
         }
+    }
+
+    /// One Newton step of every entry towards the surface `F = 0` along the gradient of the
+    /// last [`evaluate`](Self::evaluate) with gradients, `p ← p − F ∇F/|∇F|²` (entries whose
+    /// gradient is degenerate or whose numbers are not finite stay). Returns whether every
+    /// entry was already on the surface before its step (`|F| ≤` the projection tolerance
+    /// times `|∇F|`).
+    pub fn newton_step(&mut self) -> bool {
+        let n = self.len();
+        let [px, py, pz] = &mut self.p;
+        let [gx, gy, gz] = &self.grad;
+        let (px, py, pz) = (&mut px[..n], &mut py[..n], &mut pz[..n]);
+        newton_steps(px, py, pz, &self.value[..n], gx, gy, gz)
     }
 
     /// Appends the points `base + i` for each `i` in `hits`, read from the world SoA arrays `q`
@@ -222,6 +235,40 @@ impl Batch {
         if deformed && want_gradient {
             gradient_to_shape(&self.jac, gx, gy, gz);
         }
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// One Newton step towards `F = 0` along the gradient, `p ← p − F ∇F/|∇F|²`, for every
+    /// entry (SoA positions, values and gradients; entries whose gradient is degenerate or
+    /// whose numbers are not finite stay). Returns whether every entry was already on the
+    /// surface before its step: `|F| ≤ PROJECTION_TOLERANCE_M · |∇F|`, a first-order distance
+    /// within the projection tolerance.
+    fn newton_steps(
+        px: &mut [f32],
+        py: &mut [f32],
+        pz: &mut [f32],
+        value: &[f32],
+        gx: &[f32],
+        gy: &[f32],
+        gz: &[f32],
+    ) -> bool {
+        let n = px.len().min(py.len()).min(pz.len()).min(value.len());
+        let n = n.min(gx.len()).min(gy.len()).min(gz.len());
+        let mut all_converged = true;
+        for i in 0..n {
+            let (x, y, z, v) = (gx[i], gy[i], gz[i], value[i]);
+            let len2 = x * x + y * y + z * z;
+            let glen = len2.sqrt();
+            all_converged &= (glen > 0.0) & (v.abs() <= PROJECTION_TOLERANCE_M * glen);
+            let step = (len2 > 1e-12) & v.is_finite() & len2.is_finite();
+            let k = v / len2;
+            let (nx, ny, nz) = (px[i] - x * k, py[i] - y * k, pz[i] - z * k);
+            px[i] = if step { nx } else { px[i] };
+            py[i] = if step { ny } else { py[i] };
+            pz[i] = if step { nz } else { pz[i] };
+        }
+        all_converged
     }
 }
 
