@@ -470,6 +470,11 @@ fn apply_moves(
     let (v1, v2) = rest.split_at_mut(free);
     let [q0, q1, q2] = &sc.q;
     let fat = &input.fat_m[..free];
+    // The points eq. 13 moved, in index order, into the outcome.
+    let recheck_m = input.recheck_m;
+    let mut report = |f: usize, len: f32, component: f32| {
+        out.report(f, len, component, sc.last_shape[f], recheck_m, touched);
+    };
     if sc.moved.len() * DENSE_MOVES < free {
         // Few moved points (re-checks): point by point, in index order, the same arithmetic.
         let mut order = std::mem::take(&mut sc.moved_sorted);
@@ -499,14 +504,7 @@ fn apply_moves(
                 input.k_perpendicular,
             );
             (v0[f], v1[f], v2[f]) = (w[0], w[1], w[2]);
-            out.report(
-                f,
-                len,
-                component,
-                sc.last_shape[f],
-                input.recheck_m,
-                touched,
-            );
+            report(f, len, component);
         }
         sc.moved_sorted = order;
         return out;
@@ -551,14 +549,7 @@ fn apply_moves(
         .zip(&sc.applied_component_m[..free]);
     for (f, (&len, &component)) in applied.enumerate() {
         if len >= 0.0 {
-            out.report(
-                f,
-                len,
-                component,
-                sc.last_shape[f],
-                input.recheck_m,
-                touched,
-            );
+            report(f, len, component);
         }
     }
     out
