@@ -274,6 +274,25 @@ mod tests {
     use super::*;
 
     #[test]
+    fn resampled_fields_keep_the_grid_values_and_interpolate_between() {
+        let (m, n) = (4u32, 3u32);
+        let values: Vec<f32> = (0..m * n).map(|k| k as f32).collect();
+        // The same grid: unchanged.
+        assert_eq!(resample_field(&values, m, n, m, n), values);
+        // Twice as fine: grid values kept, midpoints averaged (wrapping around).
+        let fine = resample_field(&values, m, n, 2 * m, 2 * n - 1);
+        assert_eq!(fine.len(), 8 * 5);
+        assert_eq!(fine[0], 0.0);
+        assert_eq!(fine[2], 1.0);
+        assert_eq!(fine[1], 0.5);
+        assert_eq!(fine[7], 1.5, "between point 3 and point 0 around");
+        assert_eq!(fine[8], 2.0, "half way between rows 0 and 1");
+        assert_eq!(fine[4 * 8 + 6], values[(2 * m + 3) as usize]);
+        // A field that does not fit gives zeros.
+        assert_eq!(resample_field(&values[..5], m, n, 2, 2), vec![0.0; 4]);
+    }
+
+    #[test]
     fn coincident_points_keep_their_values() {
         let c = build("wombat", 16, 16).expect("wombat");
         // 16 -> 32 around (every other point coincides), 16 -> 31 along (every other row).
