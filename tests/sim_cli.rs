@@ -67,6 +67,36 @@ fn simulate_prints_the_documented_json() {
 }
 
 #[test]
+fn simulate_repeat_reports_the_median_run_of_identical_runs() {
+    let args = ["arm_16", "--seconds", "0.2"];
+    let once = simulate_json(&args);
+    let mut repeated = args.to_vec();
+    repeated.extend(["--repeat", "3"]);
+    let v = simulate_json(&repeated);
+    assert_eq!(v["repeats"], 3);
+    assert_eq!(once["repeats"], 1);
+    // The runs are the same simulation: the same steps as a single run.
+    for key in [
+        "steps",
+        "rejected_steps",
+        "force_evals",
+        "max_penetration_m",
+    ] {
+        assert_eq!(v[key], once[key], "{key}");
+    }
+    let wall = |k: &str| v[k].as_f64().expect("number");
+    let (lo, mid, hi) = (
+        wall("wall_seconds_min"),
+        wall("wall_seconds"),
+        wall("wall_seconds_max"),
+    );
+    assert!(0.0 < lo && lo <= mid && mid <= hi, "{lo} {mid} {hi}");
+    assert!((wall("slowdown") - mid / wall("sim_seconds")).abs() < 1e-12);
+    let text = simulate(&repeated);
+    assert!(text.contains("median of 3 runs"), "{text}");
+}
+
+#[test]
 fn simulate_table_and_resolution_and_every_integrator() {
     for integrator in ["euler", "rk2", "rk4"] {
         let text = simulate(&["penguin_16", "--seconds", "0.1", "--integrator", integrator]);
@@ -96,6 +126,7 @@ fn simulate_bad_arguments_say_what_is_wrong() {
         ),
         (vec!["simulate", "arm_16", "--motion", "dance"], "dance"),
         (vec!["simulate", "arm_16", "--seconds", "0"], "--seconds"),
+        (vec!["simulate", "arm_16", "--repeat", "0"], "--repeat"),
     ] {
         let out = leman().args(&args).output().expect("runs");
         assert!(!out.status.success(), "{args:?} should fail");

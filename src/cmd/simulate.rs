@@ -39,6 +39,11 @@ pub struct Args {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Run the simulation this many times, each from the character's initial state, and
+    /// report the median run's wall time (for an even count, the slower of the two middle
+    /// runs) with the fastest and slowest. Every run must take the same steps.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub repeat: u32,
 }
 
 /// Smallest and largest accepted step, seconds.
@@ -67,7 +72,12 @@ struct Report {
     skin_points: usize,
     muscles: MuscleCounts,
     sim_seconds: f64,
+    /// The median run's wall time (of `repeats`).
     wall_seconds: f64,
+    /// Runs made, and the fastest and slowest of their wall times.
+    repeats: u32,
+    wall_seconds_min: f64,
+    wall_seconds_max: f64,
     slowdown: f64,
     steps: u64,
     rejected_steps: u64,
@@ -185,31 +195,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let name = character.name.clone();
-    let neutral = leman::character::Posture::neutral(&character.skeleton);
-    let mut model = SurfaceModel::new(character, kind)?;
-    let (m, n) = model.resolution();
-
-    let clock = RealClock::new();
-    let mut fixed = FixedPosture(neutral);
-    let mut motion_poses = motion.as_ref().map(MotionPoses);
-    let poses: &mut dyn PoseSource = match motion_poses.as_mut() {
-        Some(p) => p,
-        None => &mut fixed,
-    };
-    let mut total = AdvanceReport::default();
-    let start = clock.now();
-    // Advance in 1/30 s slices, as the app's frames would.
-    let slice = 1.0 / 30.0;
-    let mut target = 0.0f64;
-    while target < seconds {
-        target = (target + slice).min(seconds);
-        let r = model.advance(target, poses, &mut Unlimited, Some(&clock));
-        total.merge(&r);
-        if !r.reached_target {
-            break;
+    let mut runs = Vec::with_capacity(args.repeat as usize);
+    for k in 0..args.repeat {
+        let run = run_once(character.clone(), kind, motion.as_ref(), seconds)?;
+        if let Some(first) = runs.first() {
+            run.same_as(first)
+                .with_context(|| format!("run {} of --repeat {}", k + 1, args.repeat))?;
         }
+        runs.push(run);
     }
-    let wall = clock.now().saturating_sub(start);
+    let walls: Vec<Duration> = runs.iter().map(|r| r.wall).collect();
+    let run = &runs[median_index(&walls)];
+    let (fastest, slowest) = (
+        walls.iter().min().copied().unwrap_or_default(),
+        walls.iter().max().copied().unwrap_or_default(),
+    );
+    let (wall, total, model) = (run.wall, &run.total, &run.model);
+    let (m, n) = model.resolution();
     let wall_s = wall.as_secs_f64().max(1e-9);
     let sim_s = model.time_s();
     let (force, constraints, other) = total.phases.fractions();
@@ -223,6 +225,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         muscles,
         sim_seconds: sim_s,
         wall_seconds: wall_s,
+        repeats: args.repeat,
+        wall_seconds_min: fastest.as_secs_f64(),
+        wall_seconds_max: slowest.as_secs_f64(),
         slowdown: if sim_s > 0.0 {
             wall_s / sim_s
         } else {
@@ -261,6 +266,74 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print_table(&report, wall, &mut out)
     }
     .context("writing the report to standard output")
+}
+
+/// Index of the median of `walls` (for an even count, the slower of the two middle ones, so
+/// the figure reported is always one a run took); 0 when empty.
+fn median_index(walls: &[Duration]) -> usize {
+    let mut order: Vec<usize> = (0..walls.len()).collect();
+    order.sort_by_key(|&i| walls[i]);
+    order.get(walls.len() / 2).copied().unwrap_or(0)
+}
+
+/// One simulation run and its wall time.
+struct Run {
+    model: SurfaceModel,
+    total: AdvanceReport,
+    wall: Duration,
+}
+
+impl Run {
+    /// Whether this run took the same steps as `other` (the simulation is deterministic, so
+    /// repeated runs must).
+    fn same_as(&self, other: &Run) -> anyhow::Result<()> {
+        let (a, b) = (&self.total, &other.total);
+        let counts = [
+            ("steps", a.steps, b.steps),
+            ("rejected_steps", a.rejected_steps, b.rejected_steps),
+            ("force_evals", a.force_evals, b.force_evals),
+        ];
+        for (what, here, first) in counts {
+            if here != first {
+                bail!("{what} {here}, the first run {first}: the simulation is not deterministic");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Runs `character` from its initial state through `motion` (the neutral posture if none) for
+/// `seconds` of simulated time in 1/30 s slices, as the app's frames would, with no wall-clock
+/// budget; the wall time is that of the simulation alone.
+fn run_once(
+    character: Character,
+    kind: IntegratorKind,
+    motion: Option<&leman::character::Motion>,
+    seconds: f64,
+) -> anyhow::Result<Run> {
+    let neutral = leman::character::Posture::neutral(&character.skeleton);
+    let mut model = SurfaceModel::new(character, kind)?;
+    let clock = RealClock::new();
+    let mut fixed = FixedPosture(neutral);
+    let mut motion_poses = motion.map(MotionPoses);
+    let poses: &mut dyn PoseSource = match motion_poses.as_mut() {
+        Some(p) => p,
+        None => &mut fixed,
+    };
+    let mut total = AdvanceReport::default();
+    let start = clock.now();
+    let slice = 1.0 / 30.0;
+    let mut target = 0.0f64;
+    while target < seconds {
+        target = (target + slice).min(seconds);
+        let r = model.advance(target, poses, &mut Unlimited, Some(&clock));
+        total.merge(&r);
+        if !r.reached_target {
+            break;
+        }
+    }
+    let wall = clock.now().saturating_sub(start);
+    Ok(Run { model, total, wall })
 }
 
 fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Result<()> {
@@ -341,12 +414,35 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         "Points pushed out", r.pushed_points_per_step, r.skin_points
     )?;
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
-    writeln!(
+    write!(
         out,
         "{:<28}{:.3} s simulated in {:.3} s",
         "Time",
         r.sim_seconds,
         wall.as_secs_f64()
     )?;
+    if r.repeats > 1 {
+        write!(
+            out,
+            " (median of {} runs, {:.3}–{:.3} s)",
+            r.repeats, r.wall_seconds_min, r.wall_seconds_max
+        )?;
+    }
+    writeln!(out)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_median_run_is_the_middle_one_by_wall_time() {
+        let ms = Duration::from_millis;
+        assert_eq!(median_index(&[ms(30), ms(10), ms(20)]), 2);
+        assert_eq!(median_index(&[ms(5)]), 0);
+        // Even count: the slower of the two middle runs.
+        assert_eq!(median_index(&[ms(40), ms(10), ms(30), ms(20)]), 2);
+        assert_eq!(median_index(&[]), 0);
+    }
 }
