@@ -111,6 +111,9 @@ struct Work {
     /// Points the constraint phase moved in the current candidate (all its passes), with the
     /// direction it pushed each; promoted to `contacts` only when the candidate is committed.
     candidate_contacts: Vec<Contact>,
+    /// Per free point, 1 if it is among `candidate_contacts` (the points the constraint phase
+    /// moved in the current candidate), else 0.
+    contact_mask: Vec<u8>,
     /// `Core::contacts` at the checkpoint.
     checkpoint_contacts: Vec<Contact>,
 }
@@ -544,7 +547,7 @@ impl SurfaceModel {
             next_s: p.next_step_s,
             forced: p.forced || outcome.max_component_m > core.epsilon_c_m,
             correction_m: outcome.max_correction_m,
-            pushed: distinct_points(&w.candidate_contacts, core.free(), &mut w.flags),
+            pushed: w.contact_mask.iter().map(|&b| u32::from(b)).sum(),
         }
     }
 
@@ -1272,6 +1275,13 @@ fn constrain_candidate(
             outcome.worst = second.worst;
         }
     }
+    w.contact_mask.clear();
+    w.contact_mask.resize(free, 0);
+    for c in &w.candidate_contacts {
+        if let Some(b) = w.contact_mask.get_mut(c.point as usize) {
+            *b = 1;
+        }
+    }
     absorb_cancelled_velocity(
         free,
         h_s,
@@ -1279,7 +1289,7 @@ fn constrain_candidate(
         &w.x_unconstrained,
         &w.x_new,
         &mut w.v_new,
-        &w.candidate_contacts,
+        &w.contact_mask,
     );
     outcome
 }
@@ -1301,6 +1311,11 @@ const SPEED_SLACK_M_PER_S: f32 = 0.05;
 /// `D = r_constrained − r_unconstrained` (the motion the constraints cancelled). Points whose
 /// velocity matches their motion (ordinary sliding and resting contact) are left to eq. 13
 /// alone: removing that component at every contact point took 4-24 % more steps.
+///
+/// It runs as one vectorised pass over every free point with the non-contacts (`contact` byte
+/// 0) masked out, since most free points are contacts, and treats each point once however many
+/// passes moved it.
+#[allow(clippy::too_many_arguments)] // each SoA slice is its own argument (see `sim::simd`)
 fn absorb_cancelled_velocity(
     free: usize,
     h_s: f32,
@@ -1308,25 +1323,68 @@ fn absorb_cancelled_velocity(
     x_unconstrained: &[f32],
     x: &[f32],
     v: &mut [f32],
-    contacts: &[Contact],
+    contact: &[u8],
 ) {
-    let at = |a: &[f32], f: usize| Vec3::new(a[f], a[free + f], a[2 * free + f]);
-    for c in contacts {
-        let f = c.point as usize;
-        if f >= free {
-            continue;
-        }
-        let d = (at(x, f) - at(x_unconstrained, f)).normalize_or_zero();
-        let vel = at(v, f);
-        let against = vel.dot(d);
-        let moved = (at(x, f) - at(x0, f)).length();
-        let out_of_proportion =
-            vel.length() * h_s > MOTION_FACTOR * moved + SPEED_SLACK_M_PER_S * h_s;
-        if against < 0.0 && out_of_proportion {
-            let kept = vel - d * against;
-            v[f] = kept.x;
-            v[free + f] = kept.y;
-            v[2 * free + f] = kept.z;
+    fn soa(a: &[f32], free: usize) -> [&[f32]; 3] {
+        let (a0, rest) = a[..3 * free].split_at(free);
+        let (a1, a2) = rest.split_at(free);
+        [a0, a1, a2]
+    }
+    let ([s0, s1, s2], [u0, u1, u2], [x0, x1, x2]) =
+        (soa(x0, free), soa(x_unconstrained, free), soa(x, free));
+    let v = &mut v[..3 * free];
+    let (v0, rest) = v.split_at_mut(free);
+    let (v1, v2) = rest.split_at_mut(free);
+    absorb_pass(h_s, s0, s1, s2, u0, u1, u2, x0, x1, x2, v0, v1, v2, contact);
+}
+
+crate::sim::simd::multiversion! {
+    /// [`absorb_cancelled_velocity`]'s arithmetic for every point whose `contact` byte is set,
+    /// with the operations (and their order) of the `glam` expressions it was written with:
+    /// `d = (x − x_u).normalize_or_zero()`, `a = v · d`, `|x − x0|`, `|v|`, `v − d a`.
+    #[allow(clippy::too_many_arguments)]
+    fn absorb_pass(
+        h_s: f32,
+        // The step's start positions, the unconstrained and the constrained candidate, and
+        // the candidate's velocities (SoA components).
+        s0: &[f32],
+        s1: &[f32],
+        s2: &[f32],
+        u0: &[f32],
+        u1: &[f32],
+        u2: &[f32],
+        x0: &[f32],
+        x1: &[f32],
+        x2: &[f32],
+        v0: &mut [f32],
+        v1: &mut [f32],
+        v2: &mut [f32],
+        contact: &[u8],
+    ) {
+        let n = contact.len().min(s0.len()).min(s1.len()).min(s2.len());
+        let n = n.min(u0.len()).min(u1.len()).min(u2.len());
+        let n = n.min(x0.len()).min(x1.len()).min(x2.len());
+        let n = n.min(v0.len()).min(v1.len()).min(v2.len());
+        let slack = SPEED_SLACK_M_PER_S * h_s;
+        for f in 0..n {
+            let (cx, cy, cz) = (x0[f] - u0[f], x1[f] - u1[f], x2[f] - u2[f]);
+            let rcp = 1.0 / ((cx * cx) + (cy * cy) + (cz * cz)).sqrt();
+            let unit = rcp.is_finite() & (rcp > 0.0);
+            let (dx, dy, dz) = if unit {
+                (cx * rcp, cy * rcp, cz * rcp)
+            } else {
+                (0.0, 0.0, 0.0)
+            };
+            let (vx, vy, vz) = (v0[f], v1[f], v2[f]);
+            let against = (vx * dx) + (vy * dy) + (vz * dz);
+            let (mx, my, mz) = (x0[f] - s0[f], x1[f] - s1[f], x2[f] - s2[f]);
+            let moved = ((mx * mx) + (my * my) + (mz * mz)).sqrt();
+            let speed = ((vx * vx) + (vy * vy) + (vz * vz)).sqrt();
+            let out_of_proportion = speed * h_s > MOTION_FACTOR * moved + slack;
+            let absorb = (contact[f] != 0) & (against < 0.0) & out_of_proportion;
+            v0[f] = if absorb { vx - dx * against } else { vx };
+            v1[f] = if absorb { vy - dy * against } else { vy };
+            v2[f] = if absorb { vz - dz * against } else { vz };
         }
     }
 }
@@ -1344,21 +1402,6 @@ fn fat_stride(core: &Core) -> (usize, usize) {
 /// The normals that offset the fat points of `grid` (the full grid of `core`'s skin).
 fn fat_normals(core: &Core, grid: &[Vec<f32>; 3], out: &mut [Vec<f32>; 3]) {
     forces::grid_normals_strided(core.around, core.along, fat_stride(core), grid, out);
-}
-
-/// Number of distinct free points among `contacts` (a point moved by several passes is listed
-/// once per pass); `seen` is scratch.
-fn distinct_points(contacts: &[Contact], free: usize, seen: &mut Vec<u8>) -> u32 {
-    seen.clear();
-    seen.resize(free, 0);
-    let mut count = 0;
-    for c in contacts {
-        if let Some(s) = seen.get_mut(c.point as usize) {
-            count += u32::from(*s == 0);
-            *s = 1;
-        }
-    }
-    count
 }
 
 /// Appends the points the last constraint pass moved, with their push directions.

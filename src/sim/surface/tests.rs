@@ -551,3 +551,48 @@ fn baseline_and_avx2_copies_simulate_the_same_bits() {
         assert_eq!(differing, 0, "{name}: {differing} state values differ");
     }
 }
+
+#[test]
+fn cancelled_velocity_is_absorbed_only_at_contacts_that_outrun_their_motion() {
+    // Five free points, SoA. Each was held back by its constraints along +z (the constrained
+    // position is above the unconstrained one); the step is 10 ms.
+    let free = 5;
+    let h = 0.01f32;
+    let soa = |p: [[f32; 3]; 5]| -> Vec<f32> {
+        (0..3).flat_map(|c| p.iter().map(move |q| q[c])).collect()
+    };
+    let start = soa([[0.0; 3]; 5]);
+    let unconstrained = soa([[0.0, 0.0, -1e-3]; 5]);
+    // Point 3 went 15 mm in the step: its speed (2 m/s) is in proportion to its motion.
+    let mut now = [[0.0, 0.0, 1e-5]; 5];
+    now[3] = [15e-3, 0.0, 1e-5];
+    let now = soa(now);
+    // Points 0, 1 and 3 move into the correction at 2 m/s; point 2 moves out of it; point 4
+    // moves into it but is not a contact.
+    let v_in = [0.3, 0.0, -2.0];
+    let mut v = soa([v_in, v_in, [0.3, 0.0, 2.0], v_in, v_in]);
+    let contact = [1, 1, 1, 1, 0];
+    absorb_cancelled_velocity(free, h, &start, &unconstrained, &now, &mut v, &contact);
+    let vel = |f: usize| Vec3::new(v[f], v[free + f], v[2 * free + f]);
+    // The component against the correction is gone, the tangential one stays.
+    for f in [0, 1] {
+        assert!(
+            (vel(f) - Vec3::new(0.3, 0.0, 0.0)).length() < 1e-6,
+            "{f}: {}",
+            vel(f)
+        );
+    }
+    assert_eq!(
+        vel(2),
+        Vec3::new(0.3, 0.0, 2.0),
+        "moving out of the correction"
+    );
+    assert_eq!(vel(3), Vec3::from(v_in), "in proportion to its motion");
+    assert_eq!(vel(4), Vec3::from(v_in), "not a contact");
+    // The baseline copy gives the same bits.
+    let mut v_base = soa([v_in, v_in, [0.3, 0.0, 2.0], v_in, v_in]);
+    crate::sim::simd::with_baseline_copies(|| {
+        absorb_cancelled_velocity(free, h, &start, &unconstrained, &now, &mut v_base, &contact)
+    });
+    assert_eq!(v, v_base);
+}
