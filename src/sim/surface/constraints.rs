@@ -20,7 +20,9 @@
 //!   and projection right there). The survivors form a [`Batch`] whose values and gradients
 //!   are computed by the vectorised kernels ([`super::kernels`]); points with `F < 0` are
 //!   projected by two batched Newton steps along the gradient (a scalar exact projection for
-//!   any that do not land within [`PROJECTION_TOLERANCE_M`]).
+//!   any that do not land within [`PROJECTION_TOLERANCE_M`]). The projections become world
+//!   moves, push directions and surface velocities in vectorised passes ([`super::moves`]);
+//!   only the writes into the per-point arrays go point by point.
 //! - **Rounds.** Shapes are visited in order and each sees the points the earlier ones moved
 //!   (Gauss-Seidel); a point pushed out of one muscle into an overlapping one is caught by the
 //!   next round, which tests only the points the previous round moved, each against the
@@ -34,6 +36,7 @@
 use glam::{Affine3A, Vec3};
 
 use super::kernels::Batch;
+use super::moves::MoveBatch;
 use crate::character::{PROJECTION_TOLERANCE_M, Primitive, ShapeGeometry, ShapeInstance};
 
 /// Rounds over the shapes in one pass (a point pushed into a neighbouring muscle is fixed in
@@ -99,6 +102,8 @@ struct PassScratch {
     hit_index: Vec<u32>,
     batch: Batch,
     project: Batch,
+    /// The world moves of `project`'s entries.
+    moves: MoveBatch,
     /// The gated points in ascending order, unless every free point is gated (`all_gated`): a
     /// run's gated points are found by two binary searches, so a sparse round (later rounds,
     /// re-checks) costs nothing per ungated point.
@@ -764,6 +769,31 @@ fn record_move(
     sc.last_normal[2][f] = normal.z;
 }
 
+/// Records that `f`'s fat point was moved to `q` (world, along the unit `normal`) by `by`'s
+/// shape in its round, where that shape's surface moves at `surface` (m/s): what
+/// [`record_move`] records, with the move and the velocity computed by the batched passes of
+/// [`super::moves`].
+#[inline(always)]
+fn record_settled_move(
+    sc: &mut PassScratch,
+    f: usize,
+    q: Vec3,
+    surface: Vec3,
+    normal: Vec3,
+    by: Owed,
+) {
+    for c in 0..3 {
+        sc.q[c][f] = q[c];
+        sc.surface_vel[c][f] = surface[c];
+        sc.last_normal[c][f] = normal[c];
+    }
+    if sc.moved_round[f] == u8::MAX {
+        sc.moved.push(f as u32);
+    }
+    sc.moved_round[f] = by.round;
+    sc.last_shape[f] = by.shape;
+}
+
 /// An undeformed sphere: exact test and projection over the runs. Returns the points moved.
 fn sphere_stage(
     sc: &mut PassScratch,
@@ -847,27 +877,45 @@ fn general_stage(
         }
         sc.project.evaluate(geometry, true);
     }
+    // Where the batched steps did not land, the exact projection from the original position.
+    let n = sc.project.len();
+    let mv = &mut sc.moves;
+    mv.resize(n);
+    mv.mark_converged(&sc.project.value, &sc.project.grad);
+    for i in 0..n {
+        if mv.converged[i] == 0 {
+            let local = Vec3::new(sc.origin[0][i], sc.origin[1][i], sc.origin[2][i]);
+            let p = geometry.project(local);
+            for c in 0..3 {
+                sc.project.p[c][i] = p[c];
+            }
+        }
+    }
+    mv.world_moves(&s.world_from_shape, &sc.project.p, &sc.origin, SETTLED_M);
+    for (i, &f) in sc.project.point.iter().enumerate() {
+        for c in 0..3 {
+            mv.q[c][i] = sc.q[c][f as usize];
+        }
+    }
+    let shapes = motion
+        .shape
+        .map(|(end, start)| (&end.shape_from_world, &start.world_from_shape));
+    mv.finish(shapes, motion.inv_h);
     let mut moved = 0;
-    for i in 0..sc.project.len() {
-        let converged = on_surface(sc.project.value[i], sc.project.gradient(i));
-        let local = Vec3::new(sc.origin[0][i], sc.origin[1][i], sc.origin[2][i]);
-        let on_surface = if converged {
-            sc.project.position(i)
-        } else {
-            geometry.project(local)
-        };
-        let d = s.world_from_shape.transform_vector3(on_surface - local);
-        if !d.is_finite() || d.length_squared() <= SETTLED_M * SETTLED_M {
+    for i in 0..n {
+        if sc.moves.keep[i] == 0 {
             continue;
         }
-        let len = d.length();
-        let normal = if len > 1e-9 {
-            d / len
+        let mv = &sc.moves;
+        let at = |a: &[Vec<f32>; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
+        let normal = if mv.len[i] > 1e-9 {
+            at(&mv.normal)
         } else {
-            outward(geometry, s, on_surface)
+            outward(geometry, s, sc.project.position(i))
         };
+        let (q, surface) = (at(&mv.q), at(&mv.surface_vel));
         let f = sc.project.point[i] as usize;
-        record_move(sc, f, d, normal, owed, motion);
+        record_settled_move(sc, f, q, surface, normal, owed);
         moved += 1;
     }
     moved
@@ -1054,14 +1102,6 @@ crate::sim::simd::multiversion! {
             hit[i] = u8::from(inside) & gate[i];
         }
     }
-}
-
-/// Whether `F`/`|∇F|` (a first-order distance) is within [`PROJECTION_TOLERANCE_M`]: the
-/// test [`Batch::newton_step`] makes with the same arithmetic.
-#[inline]
-fn on_surface(value: f32, grad: Vec3) -> bool {
-    let glen = grad.length();
-    glen > 0.0 && value.abs() <= PROJECTION_TOLERANCE_M * glen
 }
 
 /// Outward unit normal of a shape at a surface point, world.

@@ -145,7 +145,7 @@ impl Batch {
     }
 
     /// Entry `i`'s gradient.
-    #[inline]
+    #[cfg(test)]
     pub fn gradient(&self, i: usize) -> Vec3 {
         Vec3::new(self.grad[0][i], self.grad[1][i], self.grad[2][i])
     }

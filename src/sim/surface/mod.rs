@@ -24,6 +24,7 @@ pub mod constraints;
 mod fastmath;
 pub mod forces;
 pub(crate) mod kernels;
+mod moves;
 mod resample;
 #[cfg(test)]
 mod tests;
