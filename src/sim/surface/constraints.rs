@@ -35,6 +35,7 @@
 
 use glam::{Affine3A, Vec3};
 
+use super::forces;
 use super::kernels::Batch;
 use super::moves::MoveBatch;
 use crate::character::{PROJECTION_TOLERANCE_M, Primitive, ShapeGeometry, ShapeInstance};
@@ -469,10 +470,8 @@ fn apply_moves(
     let mut out = ConstraintOutcome::default();
     let [g0, g1, g2] = grid;
     let [n0, n1, n2] = normals;
-    let (x0, rest) = x.split_at_mut(free);
-    let (x1, x2) = rest.split_at_mut(free);
-    let (v0, rest) = v.split_at_mut(free);
-    let (v1, v2) = rest.split_at_mut(free);
+    let [x0, x1, x2] = forces::blocks_mut(x, free);
+    let [v0, v1, v2] = forces::blocks_mut(v, free);
     let [q0, q1, q2] = &sc.q;
     let fat = &input.fat_m[..free];
     // The points eq. 13 moved, in index order, into the outcome.
@@ -530,7 +529,7 @@ fn apply_moves(
         &mut g2[m..m + free],
         x0,
         x1,
-        &mut x2[..free],
+        x2,
         &mut sc.applied_m[..free],
         &mut sc.applied_component_m[..free],
     );
@@ -547,7 +546,7 @@ fn apply_moves(
         input.k_perpendicular,
         v0,
         v1,
-        &mut v2[..free],
+        v2,
     );
     let applied = sc.applied_m[..free]
         .iter()

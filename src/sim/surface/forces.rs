@@ -839,8 +839,15 @@ fn contiguous_run(point: &[u32], free: usize) -> Option<usize> {
 }
 
 /// The three blocks `[x…, y…, z…]` of a state of `free` points.
-fn blocks(state: &[f32], free: usize) -> [&[f32]; 3] {
+pub(super) fn blocks(state: &[f32], free: usize) -> [&[f32]; 3] {
     block_slices(state, free, 0, free)
+}
+
+/// [`blocks`], mutable.
+pub(super) fn blocks_mut(state: &mut [f32], free: usize) -> [&mut [f32]; 3] {
+    let (x, rest) = state[..3 * free].split_at_mut(free);
+    let (y, z) = rest.split_at_mut(free);
+    [x, y, z]
 }
 
 /// The three blocks of `state` restricted to points `o..o + len`.

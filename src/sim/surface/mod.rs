@@ -1326,16 +1326,12 @@ fn absorb_cancelled_velocity(
     v: &mut [f32],
     contact: &[u8],
 ) {
-    fn soa(a: &[f32], free: usize) -> [&[f32]; 3] {
-        let (a0, rest) = a[..3 * free].split_at(free);
-        let (a1, a2) = rest.split_at(free);
-        [a0, a1, a2]
-    }
-    let ([s0, s1, s2], [u0, u1, u2], [x0, x1, x2]) =
-        (soa(x0, free), soa(x_unconstrained, free), soa(x, free));
-    let v = &mut v[..3 * free];
-    let (v0, rest) = v.split_at_mut(free);
-    let (v1, v2) = rest.split_at_mut(free);
+    let ([s0, s1, s2], [u0, u1, u2], [x0, x1, x2]) = (
+        forces::blocks(x0, free),
+        forces::blocks(x_unconstrained, free),
+        forces::blocks(x, free),
+    );
+    let [v0, v1, v2] = forces::blocks_mut(v, free);
     absorb_pass(h_s, s0, s1, s2, u0, u1, u2, x0, x1, x2, v0, v1, v2, contact);
 }
 
