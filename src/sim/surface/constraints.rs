@@ -739,48 +739,11 @@ impl SurfaceMotion<'_> {
     }
 }
 
-/// Records that `f` was moved by `d` (world, along the unit `normal`) by `by`'s shape in its
-/// round, and the velocity of that shape's surface where it left the point.
-#[inline(always)]
-fn record_move(
-    sc: &mut PassScratch,
-    f: usize,
-    d: Vec3,
-    normal: Vec3,
-    by: Owed,
-    motion: SurfaceMotion<'_>,
-) {
-    let (s_idx, round) = (by.shape, by.round);
-    sc.q[0][f] += d.x;
-    sc.q[1][f] += d.y;
-    sc.q[2][f] += d.z;
-    let surface = motion.velocity_at(Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]));
-    sc.surface_vel[0][f] = surface.x;
-    sc.surface_vel[1][f] = surface.y;
-    sc.surface_vel[2][f] = surface.z;
-    if sc.moved_round[f] == u8::MAX {
-        sc.moved.push(f as u32);
-    }
-    sc.moved_round[f] = round;
-    sc.last_shape[f] = s_idx;
-    sc.last_normal[0][f] = normal.x;
-    sc.last_normal[1][f] = normal.y;
-    sc.last_normal[2][f] = normal.z;
-}
-
 /// Records that `f`'s fat point was moved to `q` (world, along the unit `normal`) by `by`'s
-/// shape in its round, where that shape's surface moves at `surface` (m/s): what
-/// [`record_move`] records, with the move and the velocity computed by the batched passes of
-/// [`super::moves`].
+/// shape in its round, where that shape's surface moves at `surface` (m/s; eq. 13's
+/// reference, [`SurfaceMotion::velocity_at`]).
 #[inline(always)]
-fn record_settled_move(
-    sc: &mut PassScratch,
-    f: usize,
-    q: Vec3,
-    surface: Vec3,
-    normal: Vec3,
-    by: Owed,
-) {
+fn record_move(sc: &mut PassScratch, f: usize, q: Vec3, surface: Vec3, normal: Vec3, by: Owed) {
     for c in 0..3 {
         sc.q[c][f] = q[c];
         sc.surface_vel[c][f] = surface[c];
@@ -827,7 +790,8 @@ fn sphere_stage(
             if !delta.is_finite() || delta.length_squared() <= SETTLED_M * SETTLED_M {
                 continue;
             }
-            record_move(sc, f, delta, dir, owed, motion);
+            let moved_to = q + delta;
+            record_move(sc, f, moved_to, motion.velocity_at(moved_to), dir, owed);
             moved += 1;
         }
         sc.hit_index = found;
@@ -891,15 +855,10 @@ fn general_stage(
         }
     }
     mv.world_moves(&s.world_from_shape, &sc.project.p, &sc.origin, SETTLED_M);
-    for (i, &f) in sc.project.point.iter().enumerate() {
-        for c in 0..3 {
-            mv.q[c][i] = sc.q[c][f as usize];
-        }
-    }
     let shapes = motion
         .shape
         .map(|(end, start)| (&end.shape_from_world, &start.world_from_shape));
-    mv.finish(shapes, motion.inv_h);
+    mv.finish(&sc.project.point, &sc.q, shapes, motion.inv_h);
     let mut moved = 0;
     for i in 0..n {
         if sc.moves.keep[i] == 0 {
@@ -914,7 +873,7 @@ fn general_stage(
         };
         let (q, surface) = (at(&mv.q), at(&mv.surface_vel));
         let f = sc.project.point[i] as usize;
-        record_settled_move(sc, f, q, surface, normal, owed);
+        record_move(sc, f, q, surface, normal, owed);
         moved += 1;
     }
     moved

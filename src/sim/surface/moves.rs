@@ -30,14 +30,14 @@ pub struct MoveBatch {
     pub normal: [Vec<f32>; 3],
     /// 1 where the move counts (finite and longer than the settled length), else 0.
     pub keep: Vec<u8>,
-    /// The moved fat point, world (gathered before [`MoveBatch::finish`], moved by it).
+    /// The moved fat point, world (set by [`MoveBatch::finish`]).
     pub q: [Vec<f32>; 3],
     /// Velocity of the shape's surface where the point was left, world, m/s.
     pub surface_vel: [Vec<f32>; 3],
 }
 
 impl MoveBatch {
-    /// Sizes every array for `n` entries.
+    /// Sizes every array but `q` (which [`MoveBatch::finish`] sets) for `n` entries.
     pub fn resize(&mut self, n: usize) {
         self.converged.resize(n, 0);
         self.len.resize(n, 0.0);
@@ -45,7 +45,6 @@ impl MoveBatch {
         for c in 0..3 {
             self.d[c].resize(n, 0.0);
             self.normal[c].resize(n, 0.0);
-            self.q[c].resize(n, 0.0);
             self.surface_vel[c].resize(n, 0.0);
         }
     }
@@ -90,11 +89,22 @@ impl MoveBatch {
         );
     }
 
-    /// Moves the gathered fat points `q` by `d` and sets `surface_vel` to the velocity of the
-    /// surface point now under each: it was at `start_world_from_shape(end_shape_from_world(q))`
-    /// at the start of the step, `inv_h_per_s` before. `None` (the step's shapes differ): the
-    /// surface counts as still.
-    pub fn finish(&mut self, motion: Option<(&Affine3A, &Affine3A)>, inv_h_per_s: f32) {
+    /// Sets `q` to the fat points of the entries' free points `point` (read from the world SoA
+    /// arrays `fat_points`) moved by `d`, and `surface_vel` to the velocity of the surface
+    /// point now under each: it was at `start_world_from_shape(end_shape_from_world(q))` at the
+    /// start of the step, `inv_h_per_s` before. `None` (the step's shapes differ): the surface
+    /// counts as still.
+    pub fn finish(
+        &mut self,
+        point: &[u32],
+        fat_points: &[Vec<f32>; 3],
+        motion: Option<(&Affine3A, &Affine3A)>,
+        inv_h_per_s: f32,
+    ) {
+        for (q, from) in self.q.iter_mut().zip(fat_points) {
+            q.clear();
+            q.extend(point.iter().map(|&f| from[f as usize]));
+        }
         let [qx, qy, qz] = &mut self.q;
         let [dx, dy, dz] = &self.d;
         move_points(qx, qy, qz, dx, dy, dz);
@@ -289,10 +299,10 @@ mod tests {
         for baseline in [false, true] {
             let mut b = MoveBatch::default();
             b.resize(n);
+            let points: Vec<u32> = (0..n as u32).collect();
             let run = |b: &mut MoveBatch| {
                 b.world_moves(&to_world, &p, &origin, settled);
-                b.q.clone_from(&q);
-                b.finish(Some((&end_from_world, &start_to_world)), inv_h);
+                b.finish(&points, &q, Some((&end_from_world, &start_to_world)), inv_h);
             };
             if baseline {
                 with_baseline_copies(|| run(&mut b));
@@ -347,7 +357,8 @@ mod tests {
         let mut b = MoveBatch::default();
         b.resize(3);
         b.surface_vel[1][2] = 7.0;
-        b.finish(None, 100.0);
+        let q = [vec![1.0; 3], vec![2.0; 3], vec![3.0; 3]];
+        b.finish(&[0, 2, 1], &q, None, 100.0);
         assert!(b.surface_vel.iter().flatten().all(|&v| v == 0.0));
     }
 }
