@@ -238,6 +238,14 @@ impl Batch {
     }
 }
 
+/// Whether `F` with a gradient of squared length `grad_len2` is on the surface: `|∇F| > 0` and
+/// the first-order distance `|F| / |∇F|` within [`PROJECTION_TOLERANCE_M`].
+#[inline(always)]
+pub(super) fn on_surface(value: f32, grad_len2: f32) -> bool {
+    let glen = grad_len2.sqrt();
+    (glen > 0.0) & (value.abs() <= PROJECTION_TOLERANCE_M * glen)
+}
+
 crate::sim::simd::multiversion! {
     /// One Newton step towards `F = 0` along the gradient, `p ← p − F ∇F/|∇F|²`, for every
     /// entry (SoA positions, values and gradients; entries whose gradient is degenerate or
@@ -259,8 +267,7 @@ crate::sim::simd::multiversion! {
         for i in 0..n {
             let (x, y, z, v) = (gx[i], gy[i], gz[i], value[i]);
             let len2 = x * x + y * y + z * z;
-            let glen = len2.sqrt();
-            all_converged &= (glen > 0.0) & (v.abs() <= PROJECTION_TOLERANCE_M * glen);
+            all_converged &= on_surface(v, len2);
             let step = (len2 > 1e-12) & v.is_finite() & len2.is_finite();
             let k = v / len2;
             let (nx, ny, nz) = (px[i] - x * k, py[i] - y * k, pz[i] - z * k);

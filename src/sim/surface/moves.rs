@@ -14,7 +14,7 @@
 
 use glam::Affine3A;
 
-use crate::character::PROJECTION_TOLERANCE_M;
+use super::kernels::on_surface;
 
 /// Per-entry results of one shape's batch (structure of arrays, reused between calls).
 #[derive(Debug, Clone, Default)]
@@ -131,13 +131,13 @@ impl MoveBatch {
 }
 
 crate::sim::simd::multiversion! {
-    /// `out[i] = 1` where `|∇F| > 0` and `|F| ≤` the projection tolerance `· |∇F|`.
+    /// `out[i] = 1` where the entry is on the surface ([`on_surface`], the test the batched
+    /// Newton steps make).
     fn converged_pass(value: &[f32], gx: &[f32], gy: &[f32], gz: &[f32], out: &mut [u8]) {
         let n = out.len().min(value.len()).min(gx.len()).min(gy.len()).min(gz.len());
         for i in 0..n {
-            let glen = ((gx[i] * gx[i]) + (gy[i] * gy[i]) + (gz[i] * gz[i])).sqrt();
-            let on = (glen > 0.0) & (value[i].abs() <= PROJECTION_TOLERANCE_M * glen);
-            out[i] = u8::from(on);
+            let len2 = (gx[i] * gx[i]) + (gy[i] * gy[i]) + (gz[i] * gz[i]);
+            out[i] = u8::from(on_surface(value[i], len2));
         }
     }
 }
@@ -238,6 +238,7 @@ mod tests {
     use glam::{Quat, Vec3};
 
     use super::*;
+    use crate::character::PROJECTION_TOLERANCE_M;
     use crate::sim::simd::with_baseline_copies;
     use crate::test_noise::Noise;
 
