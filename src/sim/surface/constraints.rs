@@ -739,21 +739,76 @@ impl SurfaceMotion<'_> {
     }
 }
 
-/// Records that `f`'s fat point was moved to `q` (world, along the unit `normal`) by `by`'s
-/// shape in its round, where that shape's surface moves at `surface` (m/s; eq. 13's
-/// reference, [`SurfaceMotion::velocity_at`]).
-#[inline(always)]
-fn record_move(sc: &mut PassScratch, f: usize, q: Vec3, surface: Vec3, normal: Vec3, by: Owed) {
-    for c in 0..3 {
-        sc.q[c][f] = q[c];
-        sc.surface_vel[c][f] = surface[c];
-        sc.last_normal[c][f] = normal[c];
+/// The per-point arrays a stage records its moves in, each borrowed as a slice over the free
+/// points: one length for all (so one bounds check per move), held in registers across the
+/// pushes onto `moved` (writes through a `&mut PassScratch` made the compiler reload every
+/// array after each push; this cost about a twentieth of the constraint phase).
+struct MoveLog<'a> {
+    q: [&'a mut [f32]; 3],
+    surface_vel: [&'a mut [f32]; 3],
+    last_normal: [&'a mut [f32]; 3],
+    moved_round: &'a mut [u8],
+    last_shape: &'a mut [u32],
+    moved: &'a mut Vec<u32>,
+}
+
+impl<'a> MoveLog<'a> {
+    #[inline(always)]
+    fn new(
+        q: &'a mut [Vec<f32>; 3],
+        surface_vel: &'a mut [Vec<f32>; 3],
+        last_normal: &'a mut [Vec<f32>; 3],
+        moved_round: &'a mut [u8],
+        last_shape: &'a mut [u32],
+        moved: &'a mut Vec<u32>,
+    ) -> Self {
+        let lens = q.iter().chain(surface_vel.iter()).chain(last_normal.iter());
+        let n = lens
+            .map(Vec::len)
+            .fold(moved_round.len().min(last_shape.len()), usize::min);
+        let [qx, qy, qz] = q;
+        let [sx, sy, sz] = surface_vel;
+        let [nx, ny, nz] = last_normal;
+        MoveLog {
+            q: [&mut qx[..n], &mut qy[..n], &mut qz[..n]],
+            surface_vel: [&mut sx[..n], &mut sy[..n], &mut sz[..n]],
+            last_normal: [&mut nx[..n], &mut ny[..n], &mut nz[..n]],
+            moved_round: &mut moved_round[..n],
+            last_shape: &mut last_shape[..n],
+            moved,
+        }
     }
-    if sc.moved_round[f] == u8::MAX {
-        sc.moved.push(f as u32);
+
+    /// Records that `f`'s fat point was moved to `q` (world, along the unit `normal`) by
+    /// `by`'s shape in its round, where that shape's surface moves at `surface` (m/s; eq. 13's
+    /// reference, [`SurfaceMotion::velocity_at`]).
+    #[inline(always)]
+    fn record(&mut self, f: usize, q: Vec3, surface: Vec3, normal: Vec3, by: Owed) {
+        for c in 0..3 {
+            self.q[c][f] = q[c];
+            self.surface_vel[c][f] = surface[c];
+            self.last_normal[c][f] = normal[c];
+        }
+        if self.moved_round[f] == u8::MAX {
+            self.moved.push(f as u32);
+        }
+        self.moved_round[f] = by.round;
+        self.last_shape[f] = by.shape;
     }
-    sc.moved_round[f] = by.round;
-    sc.last_shape[f] = by.shape;
+}
+
+/// The pass's move log ([`MoveLog`]) over `sc`'s per-point arrays.
+macro_rules! move_log {
+    ($sc:expr) => {
+        MoveLog::new(
+            &mut $sc.q,
+            &mut $sc.surface_vel,
+            &mut $sc.last_normal,
+            &mut $sc.moved_round,
+            &mut $sc.last_shape,
+            &mut $sc.moved,
+        )
+    };
 }
 
 /// An undeformed sphere: exact test and projection over the runs. Returns the points moved.
@@ -773,9 +828,10 @@ fn sphere_stage(
         let filter = Filter::Sphere { center: c, r2 };
         filter_run(sc, a, b, filter, owed);
         let found = std::mem::take(&mut sc.hit_index);
+        let mut log = move_log!(sc);
         for &i in &found {
             let f = a + i as usize;
-            let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
+            let q = Vec3::new(log.q[0][f], log.q[1][f], log.q[2][f]);
             let d = q - c;
             let dist = d.length();
             let dir = if dist > 1e-12 {
@@ -791,7 +847,7 @@ fn sphere_stage(
                 continue;
             }
             let moved_to = q + delta;
-            record_move(sc, f, moved_to, motion.velocity_at(moved_to), dir, owed);
+            log.record(f, moved_to, motion.velocity_at(moved_to), dir, owed);
             moved += 1;
         }
         sc.hit_index = found;
@@ -859,21 +915,21 @@ fn general_stage(
         .shape
         .map(|(end, start)| (&end.shape_from_world, &start.world_from_shape));
     mv.finish(&sc.project.point, &sc.q, shapes, motion.inv_h);
+    let mut log = move_log!(sc);
+    let (mv, project) = (&sc.moves, &sc.project);
     let mut moved = 0;
     for i in 0..n {
-        if sc.moves.keep[i] == 0 {
+        if mv.keep[i] == 0 {
             continue;
         }
-        let mv = &sc.moves;
         let at = |a: &[Vec<f32>; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
         let normal = if mv.len[i] > 1e-9 {
             at(&mv.normal)
         } else {
-            outward(geometry, s, sc.project.position(i))
+            outward(geometry, s, project.position(i))
         };
         let (q, surface) = (at(&mv.q), at(&mv.surface_vel));
-        let f = sc.project.point[i] as usize;
-        record_move(sc, f, q, surface, normal, owed);
+        log.record(project.point[i] as usize, q, surface, normal, owed);
         moved += 1;
     }
     moved
