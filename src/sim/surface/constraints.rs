@@ -742,7 +742,7 @@ impl SurfaceMotion<'_> {
 /// The per-point arrays a stage records its moves in, each borrowed as a slice over the free
 /// points: one length for all (so one bounds check per move), held in registers across the
 /// pushes onto `moved` (writes through a `&mut PassScratch` made the compiler reload every
-/// array after each push; this cost about a twentieth of the constraint phase).
+/// array after each push: 1.5 % of the torso's instructions, 4 % of the penguin's).
 struct MoveLog<'a> {
     q: [&'a mut [f32]; 3],
     surface_vel: [&'a mut [f32]; 3],
@@ -971,7 +971,13 @@ impl Owed {
     /// Whether point `f` is tested by this shape in this round.
     #[inline]
     fn test(self, sc: &PassScratch, f: usize) -> bool {
-        self.round == 0 || sc.moved_round[f] == self.round || self.shape < sc.last_shape[f]
+        self.owes(&sc.moved_round, &sc.last_shape, f)
+    }
+
+    /// [`Owed::test`] on the pass's `moved_round` and `last_shape` arrays.
+    #[inline]
+    fn owes(self, moved_round: &[u8], last_shape: &[u32], f: usize) -> bool {
+        self.round == 0 || moved_round[f] == self.round || self.shape < last_shape[f]
     }
 }
 
@@ -1010,13 +1016,18 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
         Some(gated_in(&sc.gated, a as u32, b as u32))
     };
     if let Some(points) = in_run.filter(|p| p.len() * SPARSE_RATIO < len) {
-        // Few gated points (later rounds, re-checks): test just those.
-        sc.hit_index.clear();
+        // Few gated points (later rounds, re-checks): test just those. The arrays are read as
+        // local slices, which the pushes cannot move.
+        let [qx, qy, qz] = &sc.q;
+        let (qx, qy, qz) = (&qx[..], &qy[..], &qz[..]);
+        let (moved_round, last_shape) = (&sc.moved_round[..], &sc.last_shape[..]);
+        let hits = &mut sc.hit_index;
+        hits.clear();
         for &f in points {
             let f = f as usize;
-            let q = Vec3::new(sc.q[0][f], sc.q[1][f], sc.q[2][f]);
-            if filter.contains(q) && owed.test(sc, f) {
-                sc.hit_index.push((f - a) as u32);
+            let q = Vec3::new(qx[f], qy[f], qz[f]);
+            if filter.contains(q) && owed.owes(moved_round, last_shape, f) {
+                hits.push((f - a) as u32);
             }
         }
         return;
