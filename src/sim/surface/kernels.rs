@@ -123,17 +123,20 @@ impl Batch {
             c.resize(end, 0.0);
         }
         let [px, py, pz] = &mut self.p;
-        let (px, py, pz) = (&mut px[start..], &mut py[start..], &mut pz[start..]);
+        let (px, py, pz) = (
+            &mut px[start..end],
+            &mut py[start..end],
+            &mut pz[start..end],
+        );
+        let point = &mut self.point[start..end];
+        // One length for the three sources, so each gather is one bounds check.
         let [qx, qy, qz] = q;
-        let out = self.point[start..]
-            .iter_mut()
-            .zip(px.iter_mut())
-            .zip(py.iter_mut())
-            .zip(pz.iter_mut());
-        for ((((point, x), y), z), &i) in out.zip(hits) {
+        let len = qx.len().min(qy.len()).min(qz.len());
+        let (qx, qy, qz) = (&qx[..len], &qy[..len], &qz[..len]);
+        for (k, &i) in hits.iter().enumerate() {
             let f = base + i as usize;
-            *point = f as u32;
-            (*x, *y, *z) = (qx[f], qy[f], qz[f]);
+            point[k] = f as u32;
+            (px[k], py[k], pz[k]) = (qx[f], qy[f], qz[f]);
         }
         transform_points(shape_from_world, px, py, pz);
     }
