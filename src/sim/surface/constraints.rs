@@ -917,22 +917,34 @@ fn general_stage(
     mv.finish(&sc.project.point, &sc.q, shapes, motion.inv_h);
     let mut log = move_log!(sc);
     let (mv, project) = (&sc.moves, &sc.project);
+    // Every per-entry array sliced to the batch's length: the loop needs no bounds checks.
+    let (keep, len, point) = (&mv.keep[..n], &mv.len[..n], &project.point[..n]);
+    let (normals, qs, surfaces) = (
+        prefix(&mv.normal, n),
+        prefix(&mv.q, n),
+        prefix(&mv.surface_vel, n),
+    );
     let mut moved = 0;
     for i in 0..n {
-        if mv.keep[i] == 0 {
+        if keep[i] == 0 {
             continue;
         }
-        let at = |a: &[Vec<f32>; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
-        let normal = if mv.len[i] > 1e-9 {
-            at(&mv.normal)
+        let at = |a: &[&[f32]; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
+        let normal = if len[i] > 1e-9 {
+            at(&normals)
         } else {
             outward(geometry, s, project.position(i))
         };
-        let (q, surface) = (at(&mv.q), at(&mv.surface_vel));
-        log.record(project.point[i] as usize, q, surface, normal, owed);
+        log.record(point[i] as usize, at(&qs), at(&surfaces), normal, owed);
         moved += 1;
     }
     moved
+}
+
+/// The first `n` entries of each of three SoA arrays.
+#[inline(always)]
+fn prefix(a: &[Vec<f32>; 3], n: usize) -> [&[f32]; 3] {
+    [&a[0][..n], &a[1][..n], &a[2][..n]]
 }
 
 /// A run whose gated points are fewer than its length over this is tested point by point.
