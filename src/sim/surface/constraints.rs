@@ -1106,22 +1106,21 @@ fn collect_hits(mask: &[u8], out: &mut Vec<u32>) {
     /// Moves bit `8 i` of a word to bit `56 + i`.
     const GATHER: u64 = 0x0102_0408_1020_4080;
     out.clear();
-    out.resize(mask.len() + 8, 0);
-    let mut k = 0;
+    // Room for the last word's eight slots, so no push below reallocates (and no zero fill).
+    out.reserve(mask.len() + 8);
     for (w, chunk) in mask.chunks_exact(8).enumerate() {
         let word = u64::from_le_bytes([
             chunk[0], chunk[1], chunk[2], chunk[3], chunk[4], chunk[5], chunk[6], chunk[7],
         ]);
         let bits = ((word & 0x0101_0101_0101_0101).wrapping_mul(GATHER) >> 56) as usize;
         let base = 8 * w as u32;
-        // `k ≤ 8 w`, so the eight slots lie within `mask.len() + 8`.
         let set = &SET_BITS[bits];
-        for (slot, &bit) in out[k..k + 8].iter_mut().zip(&set[..8]) {
-            *slot = base + u32::from(bit);
-        }
-        k += usize::from(set[8]);
+        let keep = out.len() + usize::from(set[8]);
+        out.extend_from_slice(&std::array::from_fn::<u32, 8, _>(|j| {
+            base + u32::from(set[j])
+        }));
+        out.truncate(keep);
     }
-    out.truncate(k);
 }
 
 crate::sim::simd::multiversion! {
