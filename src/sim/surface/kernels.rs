@@ -157,7 +157,25 @@ impl Batch {
     /// Without the gradient, `value` only has the sign of `F` (negative inside, zero on the
     /// surface): it is the cheaper `F_raw − 1` without the normalisation, for the filter.
     pub fn evaluate(&mut self, geometry: &ShapeGeometry, want_gradient: bool) {
-        let n = self.len();
+        let len = self.len();
+        // The kernels run over whole vectors: the entries padded with the origin (harmless in
+        // every kernel) to a multiple of LANES, so no entry takes a loop's scalar remainder.
+        let n = len.next_multiple_of(crate::sim::simd::LANES);
+        for c in 0..3 {
+            self.p[c].truncate(len);
+            self.p[c].resize(n, 0.0);
+        }
+        self.evaluate_padded(geometry, want_gradient, n);
+        for c in 0..3 {
+            self.p[c].truncate(len);
+            self.grad[c].truncate(len);
+        }
+        self.value.truncate(len);
+    }
+
+    /// [`evaluate`](Self::evaluate) over the first `n` positions of `p` (`n` at least the
+    /// batch length: the padding is evaluated too), leaving `n` values and gradients.
+    fn evaluate_padded(&mut self, geometry: &ShapeGeometry, want_gradient: bool, n: usize) {
         self.value.resize(n, 0.0);
         for c in 0..3 {
             self.grad[c].resize(n, 0.0);
