@@ -1461,7 +1461,7 @@ mod tests {
                 assert_eq!(out, want, "length {len}, density {density}");
             }
         }
-        // Every pattern of one word, after a word of hits (so the slots are reused).
+        // Every pattern of one word, after a full word (so its indices carry the base 8).
         for bits in 0..256u32 {
             let mut mask = vec![1u8; 8];
             mask.extend((0..8).map(|b| u8::from(bits & (1 << b) != 0)));
