@@ -74,13 +74,12 @@ pub struct Broadphase {
     pub rebuilds: u64,
 }
 
-/// Per-pass arrays (reused, no allocation in steady state).
+/// Per free point: its fat point and the moves a pass made (what a stage's [`MoveLog`]
+/// writes).
 #[derive(Debug, Clone, Default)]
-struct PassScratch {
-    /// Fat points, world, per free point.
+struct PointMoves {
+    /// Fat points, world.
     q: [Vec<f32>; 3],
-    /// Which points the current round tests.
-    gate: Vec<u8>,
     /// Round of each point's last move (`u8::MAX`: not moved).
     moved_round: Vec<u8>,
     /// Last shape that moved each point and the direction it moved it (world).
@@ -89,14 +88,23 @@ struct PassScratch {
     /// Velocity of the last moving shape's surface where it left each point (world, m/s,
     /// SoA): eq. 13's reference, taken when the move is recorded.
     surface_vel: [Vec<f32>; 3],
+    /// Points moved this pass, each once.
+    moved: Vec<u32>,
+}
+
+/// Per-pass arrays (reused, no allocation in steady state).
+#[derive(Debug, Clone, Default)]
+struct PassScratch {
+    /// The fat points and what the pass did to each.
+    points: PointMoves,
+    /// Which points the current round tests.
+    gate: Vec<u8>,
     /// Per free point: the correction length eq. 13 applied and its largest component, or −1
     /// where none was (scratch of [`apply_moves`]).
     applied_m: Vec<f32>,
     applied_component_m: Vec<f32>,
     /// The moved points in index order (scratch of [`apply_moves`]' sparse path).
     moved_sorted: Vec<u32>,
-    /// Points moved this pass, each once.
-    moved: Vec<u32>,
     /// Stage-one results along one run (1: a hit), padded to whole words of 8.
     hit: Vec<u8>,
     /// The hits' positions in the run.
@@ -132,9 +140,9 @@ impl Broadphase {
     /// the last shape pushed it in (the muscle's outward normal there).
     pub fn last_moves(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
         let sc = &self.scratch;
-        sc.moved.iter().map(|&f| {
+        sc.points.moved.iter().map(|&f| {
             let f = f as usize;
-            let n = &sc.last_normal;
+            let n = &sc.points.last_normal;
             (f, Vec3::new(n[0][f], n[1][f], n[2][f]))
         })
     }
@@ -230,13 +238,18 @@ impl Broadphase {
         self.ref_extents.clone_from(&self.extents);
         let sc = &mut self.scratch;
         sc.gate.resize(free, 0);
-        sc.moved_round.resize(free, u8::MAX);
-        sc.last_shape.resize(free, 0);
-        for c in sc.last_normal.iter_mut().chain(&mut sc.surface_vel) {
+        sc.points.moved_round.resize(free, u8::MAX);
+        sc.points.last_shape.resize(free, 0);
+        for c in sc
+            .points
+            .last_normal
+            .iter_mut()
+            .chain(&mut sc.points.surface_vel)
+        {
             c.resize(free, 0.0);
         }
         sc.ones.resize(free, 1);
-        for c in &mut sc.q {
+        for c in &mut sc.points.q {
             c.resize(free, 0.0);
         }
         // Row boxes.
@@ -353,7 +366,7 @@ pub fn enforce(
         let (g, n, q) = (
             &grid[c][m..m + free],
             &normals[c][m..m + free],
-            &mut sc.q[c][..free],
+            &mut sc.points.q[c][..free],
         );
         let fat = &input.fat_m[..free];
         for f in 0..free {
@@ -377,19 +390,20 @@ pub fn enforce(
         }
     }
     sc.all_gated = only.is_none();
-    sc.moved_round.fill(u8::MAX);
-    sc.moved.clear();
+    sc.points.moved_round.fill(u8::MAX);
+    sc.points.moved.clear();
     for round in 0..input.rounds.min(MAX_ROUNDS) {
         if round > 0 {
             let previous = (round - 1) as u8;
-            for (g, r) in sc.gate.iter_mut().zip(&sc.moved_round) {
+            for (g, r) in sc.gate.iter_mut().zip(&sc.points.moved_round) {
                 *g = u8::from(*r == previous);
             }
             // Only the points moved in the previous round are gated now.
-            let (moved_round, gated) = (&sc.moved_round, &mut sc.gated);
+            let (moved_round, gated) = (&sc.points.moved_round, &mut sc.gated);
             gated.clear();
             gated.extend(
-                sc.moved
+                sc.points
+                    .moved
                     .iter()
                     .copied()
                     .filter(|&f| moved_round[f as usize] == previous),
@@ -472,20 +486,31 @@ fn apply_moves(
     let [n0, n1, n2] = normals;
     let [x0, x1, x2] = forces::blocks_mut(x, free);
     let [v0, v1, v2] = forces::blocks_mut(v, free);
-    let [q0, q1, q2] = &sc.q;
+    let [q0, q1, q2] = &sc.points.q;
     let fat = &input.fat_m[..free];
     // The points eq. 13 moved, in index order, into the outcome.
     let recheck_m = input.recheck_m;
     let mut report = |f: usize, len: f32, component: f32| {
-        out.report(f, len, component, sc.last_shape[f], recheck_m, touched);
+        out.report(
+            f,
+            len,
+            component,
+            sc.points.last_shape[f],
+            recheck_m,
+            touched,
+        );
     };
-    if sc.moved.len() * DENSE_MOVES < free {
+    if sc.points.moved.len() * DENSE_MOVES < free {
         // Few moved points (re-checks): point by point, in index order, the same arithmetic.
         let mut order = std::mem::take(&mut sc.moved_sorted);
-        order.clone_from(&sc.moved);
+        order.clone_from(&sc.points.moved);
         order.sort_unstable();
-        let (g, n, [s0, s1, s2], [l0, l1, l2]) =
-            ([g0, g1, g2], [n0, n1, n2], &sc.surface_vel, &sc.last_normal);
+        let (g, n, [s0, s1, s2], [l0, l1, l2]) = (
+            [g0, g1, g2],
+            [n0, n1, n2],
+            &sc.points.surface_vel,
+            &sc.points.last_normal,
+        );
         for &f in &order {
             let f = f as usize;
             let k = m + f;
@@ -516,7 +541,7 @@ fn apply_moves(
     sc.applied_m.resize(free, -1.0);
     sc.applied_component_m.resize(free, -1.0);
     eq13_positions(
-        &sc.moved_round[..free],
+        &sc.points.moved_round[..free],
         &q0[..free],
         &q1[..free],
         &q2[..free],
@@ -533,7 +558,7 @@ fn apply_moves(
         &mut sc.applied_m[..free],
         &mut sc.applied_component_m[..free],
     );
-    let ([s0, s1, s2], [l0, l1, l2]) = (&sc.surface_vel, &sc.last_normal);
+    let ([s0, s1, s2], [l0, l1, l2]) = (&sc.points.surface_vel, &sc.points.last_normal);
     eq13_velocities(
         &sc.applied_m[..free],
         &s0[..free],
@@ -754,14 +779,15 @@ struct MoveLog<'a> {
 
 impl<'a> MoveLog<'a> {
     #[inline(always)]
-    fn new(
-        q: &'a mut [Vec<f32>; 3],
-        surface_vel: &'a mut [Vec<f32>; 3],
-        last_normal: &'a mut [Vec<f32>; 3],
-        moved_round: &'a mut [u8],
-        last_shape: &'a mut [u32],
-        moved: &'a mut Vec<u32>,
-    ) -> Self {
+    fn new(points: &'a mut PointMoves) -> Self {
+        let PointMoves {
+            q,
+            moved_round,
+            last_shape,
+            last_normal,
+            surface_vel,
+            moved,
+        } = points;
         let lens = q.iter().chain(surface_vel.iter()).chain(last_normal.iter());
         let n = lens
             .map(Vec::len)
@@ -797,20 +823,6 @@ impl<'a> MoveLog<'a> {
     }
 }
 
-/// The pass's move log ([`MoveLog`]) over `sc`'s per-point arrays.
-macro_rules! move_log {
-    ($sc:expr) => {
-        MoveLog::new(
-            &mut $sc.q,
-            &mut $sc.surface_vel,
-            &mut $sc.last_normal,
-            &mut $sc.moved_round,
-            &mut $sc.last_shape,
-            &mut $sc.moved,
-        )
-    };
-}
-
 /// An undeformed sphere: exact test and projection over the runs. Returns the points moved.
 fn sphere_stage(
     sc: &mut PassScratch,
@@ -828,7 +840,7 @@ fn sphere_stage(
         let filter = Filter::Sphere { center: c, r2 };
         filter_run(sc, a, b, filter, owed);
         let found = std::mem::take(&mut sc.hit_index);
-        let mut log = move_log!(sc);
+        let mut log = MoveLog::new(&mut sc.points);
         for &i in &found {
             let f = a + i as usize;
             let q = Vec3::new(log.q[0][f], log.q[1][f], log.q[2][f]);
@@ -874,7 +886,7 @@ fn general_stage(
             extent,
         };
         filter_run(sc, a, b, filter, owed);
-        sc.batch.extend_mapped(a, &sc.hit_index, &sc.q, t);
+        sc.batch.extend_mapped(a, &sc.hit_index, &sc.points.q, t);
     }
     if sc.batch.is_empty() {
         return 0;
@@ -914,8 +926,8 @@ fn general_stage(
     let shapes = motion
         .shape
         .map(|(end, start)| (&end.shape_from_world, &start.world_from_shape));
-    mv.finish(&sc.project.point, &sc.q, shapes, motion.inv_h);
-    let mut log = move_log!(sc);
+    mv.finish(&sc.project.point, &sc.points.q, shapes, motion.inv_h);
+    let mut log = MoveLog::new(&mut sc.points);
     let (mv, project) = (&sc.moves, &sc.project);
     // Every per-entry array sliced to the batch's length: the loop needs no bounds checks.
     let (keep, len, point) = (&mv.keep[..n], &mv.len[..n], &project.point[..n]);
@@ -980,15 +992,11 @@ struct Owed {
 }
 
 impl Owed {
-    /// Whether point `f` is tested by this shape in this round.
+    /// Whether point `f` is tested by this shape in this round, by the pass's
+    /// [`PointMoves::moved_round`] and [`PointMoves::last_shape`] (passed as slices, so a
+    /// loop that pushes hits keeps them in registers).
     #[inline]
-    fn test(self, sc: &PassScratch, f: usize) -> bool {
-        self.owes(&sc.moved_round, &sc.last_shape, f)
-    }
-
-    /// [`Owed::test`] on the pass's `moved_round` and `last_shape` arrays.
-    #[inline]
-    fn owes(self, moved_round: &[u8], last_shape: &[u32], f: usize) -> bool {
+    fn test(self, moved_round: &[u8], last_shape: &[u32], f: usize) -> bool {
         self.round == 0 || moved_round[f] == self.round || self.shape < last_shape[f]
     }
 }
@@ -1030,15 +1038,15 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
     if let Some(points) = in_run.filter(|p| p.len() * SPARSE_RATIO < len) {
         // Few gated points (later rounds, re-checks): test just those. The arrays are read as
         // local slices, which the pushes cannot move.
-        let [qx, qy, qz] = &sc.q;
+        let [qx, qy, qz] = &sc.points.q;
         let (qx, qy, qz) = (&qx[..], &qy[..], &qz[..]);
-        let (moved_round, last_shape) = (&sc.moved_round[..], &sc.last_shape[..]);
+        let (moved_round, last_shape) = (&sc.points.moved_round[..], &sc.points.last_shape[..]);
         let hits = &mut sc.hit_index;
         hits.clear();
         for &f in points {
             let f = f as usize;
             let q = Vec3::new(qx[f], qy[f], qz[f]);
-            if filter.contains(q) && owed.owes(moved_round, last_shape, f) {
+            if filter.contains(q) && owed.test(moved_round, last_shape, f) {
                 hits.push((f - a) as u32);
             }
         }
@@ -1046,9 +1054,9 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
     }
     sc.hit.resize(len.next_multiple_of(8), 0);
     let (qx, qy, qz, gate) = (
-        &sc.q[0][a..b],
-        &sc.q[1][a..b],
-        &sc.q[2][a..b],
+        &sc.points.q[0][a..b],
+        &sc.points.q[1][a..b],
+        &sc.points.q[2][a..b],
         &sc.gate[a..b],
     );
     let hit = &mut sc.hit[..len];
@@ -1063,7 +1071,8 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
     collect_hits(&sc.hit, &mut sc.hit_index);
     if owed.round > 0 {
         let mut hits = std::mem::take(&mut sc.hit_index);
-        hits.retain(|&i| owed.test(sc, a + i as usize));
+        let (moved_round, last_shape) = (&sc.points.moved_round[..], &sc.points.last_shape[..]);
+        hits.retain(|&i| owed.test(moved_round, last_shape, a + i as usize));
         sc.hit_index = hits;
     }
 }
