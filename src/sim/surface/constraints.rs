@@ -764,9 +764,9 @@ impl SurfaceMotion<'_> {
     }
 }
 
-/// The per-point arrays a stage records its moves in, each borrowed as a slice over the free
-/// points: one length for all (so one bounds check per move), held in registers across the
-/// pushes onto `moved` (writes through a `&mut PassScratch` made the compiler reload every
+/// The [`PointMoves`] arrays a stage records its moves in, each borrowed as a slice over the
+/// free points: one length for all (so one bounds check per move), held in registers across
+/// the pushes onto `moved` (writes through a `&mut PassScratch` made the compiler reload every
 /// array after each push: 1.5 % of the torso's instructions, 4 % of the penguin's).
 struct MoveLog<'a> {
     q: [&'a mut [f32]; 3],
