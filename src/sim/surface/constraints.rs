@@ -398,17 +398,9 @@ pub fn enforce(
             for (g, r) in sc.gate.iter_mut().zip(&sc.points.moved_round) {
                 *g = u8::from(*r == previous);
             }
-            // Only the points moved in the previous round are gated now.
-            let (moved_round, gated) = (&sc.points.moved_round, &mut sc.gated);
-            gated.clear();
-            gated.extend(
-                sc.points
-                    .moved
-                    .iter()
-                    .copied()
-                    .filter(|&f| moved_round[f as usize] == previous),
-            );
-            gated.sort_unstable();
+            // Only the points moved in the previous round are gated now, listed in ascending
+            // order by a scan of the gates.
+            collect_hits(&sc.gate, &mut sc.gated);
             sc.all_gated = false;
         }
         let mut changed = 0usize;
@@ -1043,10 +1035,13 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
         let (moved_round, last_shape) = (&sc.points.moved_round[..], &sc.points.last_shape[..]);
         let hits = &mut sc.hit_index;
         hits.clear();
+        // The owed test first: in later rounds it fails for most points, and it is cheaper
+        // than the filter's (both are pure, so the hits are the same).
         for &f in points {
             let f = f as usize;
-            let q = Vec3::new(qx[f], qy[f], qz[f]);
-            if filter.contains(q) && owed.test(moved_round, last_shape, f) {
+            if owed.test(moved_round, last_shape, f)
+                && filter.contains(Vec3::new(qx[f], qy[f], qz[f]))
+            {
                 hits.push((f - a) as u32);
             }
         }
@@ -1105,12 +1100,12 @@ const SET_BITS: [[u8; 9]; 256] = {
     table
 };
 
-/// Replaces `out` with the indices of the non-zero bytes of `mask` (whose length is a
-/// multiple of 8 and whose bytes are 0 or 1), eight bytes at a time and without a branch per
-/// hit: a multiplication gathers a word's eight low bits into one byte, [`SET_BITS`] gives
-/// their positions, all eight slots are written and the count advances by the number of hits.
-/// (A loop over the set bits mispredicts its exit about once per word: runs are about half
-/// hits.)
+/// Replaces `out` with the indices of the non-zero bytes of `mask` (whose bytes are 0 or 1),
+/// in ascending order, eight bytes at a time and without a branch per hit: a multiplication
+/// gathers a word's eight low bits into one byte, [`SET_BITS`] gives their positions, all eight
+/// slots are written and the count advances by the number of hits. (A loop over the set bits
+/// mispredicts its exit about once per word: runs are about half hits.) A length that is not
+/// a multiple of 8 ends with a byte-wise tail.
 fn collect_hits(mask: &[u8], out: &mut Vec<u32>) {
     /// Moves bit `8 i` of a word to bit `56 + i`.
     const GATHER: u64 = 0x0102_0408_1020_4080;
@@ -1129,6 +1124,12 @@ fn collect_hits(mask: &[u8], out: &mut Vec<u32>) {
             base + u32::from(set[j])
         }));
         out.truncate(keep);
+    }
+    let tail = mask.len() - mask.len() % 8;
+    for (i, &b) in mask.iter().enumerate().skip(tail) {
+        if b != 0 {
+            out.push(i as u32);
+        }
     }
 }
 
@@ -1215,7 +1216,9 @@ pub fn max_depth_m(
 }
 
 /// The free points within one grid step (around or along, periodic around) of `points`, each
-/// once, into `out` (`flags` is scratch of one byte per free point).
+/// once and in ascending order, into `out` (`flags` is scratch of one byte per free point).
+/// The points are marked, then listed by a scan of the marks, so the list needs no sort (a
+/// sort of the re-checks' lists of about 200 points was most of a re-check's set-up).
 pub fn neighbourhood(
     around: usize,
     free: usize,
@@ -1225,27 +1228,24 @@ pub fn neighbourhood(
 ) {
     flags.clear();
     flags.resize(free, 0);
-    out.clear();
     let m = around;
     for &p in points {
         let f = p as usize;
-        let (i, row) = (f % m, f / m);
-        let left = row * m + (i + m - 1) % m;
-        let right = row * m + (i + 1) % m;
-        let mut add = |g: usize| {
-            if g < free && flags[g] == 0 {
-                flags[g] = 1;
-                out.push(g as u32);
-            }
-        };
-        add(f);
-        add(left);
-        add(right);
-        if f >= m {
-            add(f - m);
+        if f >= free {
+            continue;
         }
-        add(f + m);
+        let (i, row) = (f % m, f / m);
+        flags[f] = 1;
+        flags[row * m + (i + m - 1) % m] = 1;
+        flags[row * m + (i + 1) % m] = 1;
+        if f >= m {
+            flags[f - m] = 1;
+        }
+        if f + m < free {
+            flags[f + m] = 1;
+        }
     }
+    collect_hits(flags, out);
 }
 
 #[cfg(test)]
@@ -1460,7 +1460,7 @@ mod tests {
     fn collect_hits_lists_exactly_the_set_bytes_in_order() {
         let mut noise = Noise(3);
         let mut out = Vec::new();
-        for len in [0usize, 8, 16, 64, 200] {
+        for len in [0usize, 5, 8, 13, 16, 64, 200, 203] {
             for density in [0.0f32, 0.1, 0.5, 1.0] {
                 let mask: Vec<u8> = (0..len)
                     .map(|_| u8::from(noise.next().abs() < density))
@@ -1477,6 +1477,35 @@ mod tests {
             collect_hits(&mask, &mut out);
             let want: Vec<u32> = (0..16).filter(|&i| mask[i as usize] == 1).collect();
             assert_eq!(out, want, "pattern {bits:#010b}");
+        }
+    }
+
+    #[test]
+    fn neighbourhood_lists_each_neighbour_once_in_order() {
+        // A 6-around grid with 4 free rows: periodic around, cut at the first and last row.
+        let (m, free) = (6usize, 24usize);
+        let mut flags = Vec::new();
+        let mut out = Vec::new();
+        for points in [
+            vec![],
+            vec![0u32],
+            vec![5, 0],
+            vec![23, 12, 12, 7],
+            vec![99, 3],
+        ] {
+            neighbourhood(m, free, &points, &mut flags, &mut out);
+            let mut want = std::collections::BTreeSet::new();
+            for &p in points.iter().filter(|&&p| (p as usize) < free) {
+                let (f, i, row) = (p as usize, p as usize % m, p as usize / m);
+                want.extend([f, row * m + (i + m - 1) % m, row * m + (i + 1) % m]);
+                want.extend(
+                    [f.checked_sub(m), Some(f + m).filter(|&g| g < free)]
+                        .into_iter()
+                        .flatten(),
+                );
+            }
+            let want: Vec<u32> = want.into_iter().map(|f| f as u32).collect();
+            assert_eq!(out, want, "points {points:?}");
         }
     }
 
