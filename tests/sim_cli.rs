@@ -40,6 +40,9 @@ fn simulate_prints_the_documented_json() {
         "nonfinite_events",
         "skin_points",
         "pushed_points_per_step",
+        "constraint_phases",
+        "recheck_passes_per_phase",
+        "rechecked_points_per_phase",
         "point_steps_per_second",
     ] {
         assert!(v[key].is_number(), "{key} missing in {v}");
@@ -54,6 +57,19 @@ fn simulate_prints_the_documented_json() {
     // The arm's skin rests on its bones: some, never more than the free points, are pushed.
     let pushed = v["pushed_points_per_step"].as_f64().expect("number");
     assert!(0.0 < pushed && pushed <= 224.0, "{pushed}");
+    // One constraint phase per accepted step or constraint rejection, at most three re-check
+    // passes each, and each pass over at most the free points.
+    let phases = v["constraint_phases"].as_f64().expect("number");
+    let steps = v["steps"].as_f64().expect("number");
+    let by_constraints = v["constraint_rejections"].as_f64().expect("number");
+    assert_eq!(phases, steps + by_constraints);
+    let passes = v["recheck_passes_per_phase"].as_f64().expect("number");
+    let points = v["rechecked_points_per_phase"].as_f64().expect("number");
+    assert!((0.0..=3.0).contains(&passes), "{passes}");
+    assert!(
+        passes <= points && points <= 224.0 * passes,
+        "{points} {passes}"
+    );
     let f = &v["phase_fraction"];
     let sum = ["force", "constraints", "other"]
         .iter()

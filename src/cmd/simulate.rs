@@ -91,6 +91,12 @@ struct Report {
     final_max_depth_m: f32,
     /// Mean skin points the constraint phase pushed out per accepted step.
     pushed_points_per_step: f64,
+    /// Constraint phases run (accepted steps and constraint rejections).
+    constraint_phases: u64,
+    /// Mean re-check passes per constraint phase.
+    recheck_passes_per_phase: f64,
+    /// Mean skin points the re-check passes tested per constraint phase.
+    rechecked_points_per_phase: f64,
     nonfinite_events: u64,
     point_steps_per_second: f64,
 }
@@ -215,6 +221,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let wall_s = wall.as_secs_f64().max(1e-9);
     let sim_s = model.time_s();
     let (force, constraints, other) = total.phases.fractions();
+    let rechecks = total.rechecks_per_phase().unwrap_or((0.0, 0.0));
     let report = Report {
         character: name,
         file: file.map(|p| p.display().to_string()),
@@ -255,6 +262,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_penetration_m: total.max_penetration_m,
         final_max_depth_m: model.max_depth_m(),
         pushed_points_per_step: total.pushed_per_step().unwrap_or(0.0),
+        constraint_phases: total.constraint_phases,
+        recheck_passes_per_phase: rechecks.0,
+        rechecked_points_per_phase: rechecks.1,
         nonfinite_events: total.nonfinite_events,
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
     };
@@ -412,6 +422,11 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         out,
         "{:<28}{:.0} of {} per step",
         "Points pushed out", r.pushed_points_per_step, r.skin_points
+    )?;
+    writeln!(
+        out,
+        "{:<28}{:.2} passes, {:.0} points per constraint phase ({} phases)",
+        "Re-checks", r.recheck_passes_per_phase, r.rechecked_points_per_phase, r.constraint_phases
     )?;
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
     write!(

@@ -170,6 +170,15 @@ pub struct AdvanceReport {
     /// Non-finite states or energy explosions caught (the step was rejected and, if the state
     /// itself was bad, the last good state restored).
     pub nonfinite_events: u64,
+    /// Constraint phases run (one per attempt that passed the error test and the guard:
+    /// accepted steps and constraint rejections). Zero for models without a constraint phase.
+    pub constraint_phases: u64,
+    /// Re-check passes the constraint phases made after their full pass (passes over the
+    /// neighbourhoods of large corrections, whose normals turned; at most three per phase).
+    pub recheck_passes: u64,
+    /// Skin points those re-check passes tested, summed over the passes. Against the free
+    /// points each full pass tests, this is the share of the constraint work the re-checks add.
+    pub rechecked_points: u64,
     /// Per-phase wall-clock time (zero unless a clock was passed).
     pub phases: PhaseTimes,
 }
@@ -190,6 +199,9 @@ impl Default for AdvanceReport {
             max_penetration_m: 0.0,
             pushed_points: 0,
             nonfinite_events: 0,
+            constraint_phases: 0,
+            recheck_passes: 0,
+            rechecked_points: 0,
             phases: PhaseTimes::default(),
         }
     }
@@ -199,6 +211,18 @@ impl AdvanceReport {
     /// Mean skin points pushed out per accepted step (`None` before the first step).
     pub fn pushed_per_step(&self) -> Option<f64> {
         (self.steps > 0).then(|| self.pushed_points as f64 / self.steps as f64)
+    }
+
+    /// Mean re-check passes and re-checked points per constraint phase (`None` before the
+    /// first constraint phase).
+    pub fn rechecks_per_phase(&self) -> Option<(f64, f64)> {
+        let phases = self.constraint_phases as f64;
+        (self.constraint_phases > 0).then(|| {
+            (
+                self.recheck_passes as f64 / phases,
+                self.rechecked_points as f64 / phases,
+            )
+        })
     }
 
     /// Adds a later report into this one (counts summed, extremes combined, time and
@@ -217,6 +241,9 @@ impl AdvanceReport {
         self.max_penetration_m = self.max_penetration_m.max(later.max_penetration_m);
         self.pushed_points += later.pushed_points;
         self.nonfinite_events += later.nonfinite_events;
+        self.constraint_phases += later.constraint_phases;
+        self.recheck_passes += later.recheck_passes;
+        self.rechecked_points += later.rechecked_points;
         self.phases.force += later.phases.force;
         self.phases.constraints += later.phases.constraints;
         self.phases.other += later.phases.other;

@@ -352,7 +352,9 @@ impl SurfaceModel {
         let w = &mut self.work;
         w.x_new.clone_from(&core.x);
         w.v_new.clone_from(&core.v);
-        constrain_candidate(core, w, CandidateTime::Start, h_s, 0.0).max_correction_m
+        constrain_candidate(core, w, CandidateTime::Start, h_s, 0.0)
+            .outcome
+            .max_correction_m
     }
 
     /// Number of candidate-list rebuilds of the constraint broadphase so far.
@@ -518,11 +520,14 @@ impl SurfaceModel {
         }
         // Constraints on the candidate.
         let c_start = clock.map(|c| c.now());
-        let outcome =
-            constrain_candidate(core, w, CandidateTime::End, h_s as f32, max_speed2.sqrt());
+        let phase = constrain_candidate(core, w, CandidateTime::End, h_s as f32, max_speed2.sqrt());
         if let (Some(start), Some(c)) = (c_start, clock) {
             report.phases.constraints += c.now().saturating_sub(start);
         }
+        report.constraint_phases += 1;
+        report.recheck_passes += u64::from(phase.recheck_passes);
+        report.rechecked_points += u64::from(phase.rechecked_points);
+        let outcome = phase.outcome;
         let at_min = h_s <= core.tolerances.min_step_s * (1.0 + 1e-9);
         // Root bracketing assumes the correction shrinks with the step. When a retry at half
         // the step or less still needs ≥ 70 % of the previous correction, the penetration does
@@ -1169,6 +1174,17 @@ enum CandidateTime {
     End,
 }
 
+/// What a constraint phase found and how much re-checking it did.
+#[derive(Debug, Clone, Copy, Default)]
+struct PhaseOutcome {
+    /// The corrections of all its passes.
+    outcome: constraints::ConstraintOutcome,
+    /// Re-check passes after the full pass (at most 3).
+    recheck_passes: u32,
+    /// Points those passes tested, summed.
+    rechecked_points: u32,
+}
+
 /// The constraint phase on the candidate in `w.x_new`/`w.v_new`: one full pass, then re-check
 /// passes over corrected neighbourhoods with refreshed normals until nothing moves (at most 4
 /// passes in all). Shared by the real step and the benchmark hook so both measure the same work.
@@ -1178,7 +1194,7 @@ fn constrain_candidate(
     when: CandidateTime,
     h_s: f32,
     max_speed_m_per_s: f32,
-) -> constraints::ConstraintOutcome {
+) -> PhaseOutcome {
     let free = core.free();
     let (rings, shapes_end) = match when {
         CandidateTime::Start => (&w.kin.rings_start, &w.shapes_start),
@@ -1229,7 +1245,7 @@ fn constrain_candidate(
     );
     w.candidate_contacts.clear();
     record_contacts(&w.broad, &mut w.candidate_contacts);
-    let mut passes = 0;
+    let (mut passes, mut rechecked_points) = (0, 0);
     // Corrections below this do not warrant another pass.
     let negligible_m = 0.1 * core.epsilon_c_m;
     let mut last_corrected = if outcome.max_correction_m > negligible_m {
@@ -1243,6 +1259,7 @@ fn constrain_candidate(
         // new normals, until nothing moves (at most 4).
         passes += 1;
         constraints::neighbourhood(core.around, free, &w.touched, &mut w.flags, &mut w.recheck);
+        rechecked_points += w.recheck.len() as u32;
         // The pass reads the normals of the re-checked points only (their fat points, and the
         // moved ones' new positions), so only theirs are brought up to date.
         let nodes = w.recheck.iter().map(|&f| core.around + f as usize);
@@ -1292,7 +1309,11 @@ fn constrain_candidate(
         &mut w.v_new,
         &w.contact_mask,
     );
-    outcome
+    PhaseOutcome {
+        outcome,
+        recheck_passes: passes,
+        rechecked_points,
+    }
 }
 
 /// A contact point's speed counts as out of proportion to its motion above this many times its

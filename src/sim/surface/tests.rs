@@ -596,3 +596,40 @@ fn cancelled_velocity_is_absorbed_only_at_contacts_that_outrun_their_motion() {
     });
     assert_eq!(v, v_base);
 }
+
+/// Every constraint phase (one per accepted step or constraint rejection) is counted, and
+/// its re-check passes (at most three, each over at least one point) with the points they
+/// tested. Large corrections make re-checks: the torso's moving shoulders push its skin by
+/// more than a tenth of ε_c; a skin resting without gravity is barely corrected and needs
+/// almost none.
+#[test]
+fn constraint_phases_count_their_rechecks() {
+    let (mut m, motion) = model_and_motion("torso", 16);
+    let free = m.core.free() as u64;
+    let r = m.advance(1.0, &mut MotionPoses(&motion), &mut Unlimited, None);
+    assert_eq!(r.constraint_phases, r.steps + r.constraint_rejections);
+    assert!(
+        0 < r.recheck_passes && r.recheck_passes <= 3 * r.constraint_phases,
+        "{} re-check passes in {} phases",
+        r.recheck_passes,
+        r.constraint_phases
+    );
+    assert!(
+        r.recheck_passes <= r.rechecked_points && r.rechecked_points <= free * r.recheck_passes,
+        "{} points in {} passes",
+        r.rechecked_points,
+        r.recheck_passes
+    );
+    let moving = r.rechecks_per_phase().expect("phases ran");
+    let (mut m, mut poses) = settled_at_rest("torso");
+    m.apply(&ParameterChange::Gravity(Vec3::ZERO))
+        .expect("gravity can change");
+    m.advance(m.time_s() + 1.0, &mut poses, &mut Unlimited, None);
+    let r = m.advance(m.time_s() + 1.0, &mut poses, &mut Unlimited, None);
+    let resting = r.rechecks_per_phase().expect("phases ran");
+    eprintln!("re-checks per phase: moving {moving:?}, resting without gravity {resting:?}");
+    assert!(
+        resting.1 < 0.1 * moving.1,
+        "resting {resting:?}, moving {moving:?}"
+    );
+}
