@@ -118,9 +118,10 @@ struct PassScratch {
     gated: Vec<u32>,
     /// `gated_before[f]`: how many gated points are below `f` (`free + 1` entries), so a run's
     /// gated points are a slice found in constant time ([`gated_in`]). Two binary searches per
-    /// run, done twice (to pick the runs, then to test them), cost about 2 % of the torso's
-    /// wall time in their dependent compare-and-move chains; this count is one pass over the
-    /// gate bytes per sparse round.
+    /// run, done twice (to pick the runs, then to test them), were about a fifth of
+    /// `filter_run`'s time in their dependent compare-and-move chains (replacing them saved
+    /// about 1 % of the torso's wall time); this count is one pass over the gate bytes per
+    /// sparse round.
     gated_before: Vec<u32>,
     /// Every free point is gated (the first round of a full pass).
     all_gated: bool,
@@ -959,7 +960,8 @@ fn prefix(a: &[Vec<f32>; 3], n: usize) -> [&[f32]; 3] {
     [&a[0][..n], &a[1][..n], &a[2][..n]]
 }
 
-/// A run whose gated points are fewer than its length over this is tested point by point.
+/// A run whose gated points are fewer than its length over this is tested point by point (in
+/// the first round; later rounds always are, see [`filter_run`]).
 const SPARSE_RATIO: usize = 6;
 
 /// The first stage's test of one shape.
