@@ -97,6 +97,8 @@ struct Report {
     recheck_passes_per_phase: f64,
     /// Mean skin points the re-check passes tested per constraint phase.
     rechecked_points_per_phase: f64,
+    /// Constraint phases whose re-checks stopped at their limit still correcting.
+    unsettled_phases: u64,
     nonfinite_events: u64,
     point_steps_per_second: f64,
 }
@@ -265,6 +267,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         constraint_phases: total.constraint_phases,
         recheck_passes_per_phase: rechecks.0,
         rechecked_points_per_phase: rechecks.1,
+        unsettled_phases: total.unsettled_phases,
         nonfinite_events: total.nonfinite_events,
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
     };
@@ -425,8 +428,12 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
     )?;
     writeln!(
         out,
-        "{:<28}{:.2} passes, {:.0} points per constraint phase ({} phases)",
-        "Re-checks", r.recheck_passes_per_phase, r.rechecked_points_per_phase, r.constraint_phases
+        "{:<28}{:.2} passes, {:.0} points per constraint phase ({} phases, {} unsettled)",
+        "Re-checks",
+        r.recheck_passes_per_phase,
+        r.rechecked_points_per_phase,
+        r.constraint_phases,
+        r.unsettled_phases
     )?;
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
     write!(

@@ -174,11 +174,15 @@ pub struct AdvanceReport {
     /// accepted steps and constraint rejections). Zero for models without a constraint phase.
     pub constraint_phases: u64,
     /// Re-check passes the constraint phases made after their full pass (passes over the
-    /// neighbourhoods of large corrections, whose normals turned; at most three per phase).
+    /// neighbourhoods of large corrections, whose normals turned; at most 8 per phase).
     pub recheck_passes: u64,
     /// Skin points those re-check passes tested, summed over the passes. Against the free
     /// points each full pass tests, this is the share of the constraint work the re-checks add.
     pub rechecked_points: u64,
+    /// Constraint phases whose re-check passes stopped at their limit while still correcting
+    /// (fat points may be left inside a muscle by up to about a correction's length, for the
+    /// next step to push out).
+    pub unsettled_phases: u64,
     /// Per-phase wall-clock time (zero unless a clock was passed).
     pub phases: PhaseTimes,
 }
@@ -202,6 +206,7 @@ impl Default for AdvanceReport {
             constraint_phases: 0,
             recheck_passes: 0,
             rechecked_points: 0,
+            unsettled_phases: 0,
             phases: PhaseTimes::default(),
         }
     }
@@ -244,6 +249,7 @@ impl AdvanceReport {
         self.constraint_phases += later.constraint_phases;
         self.recheck_passes += later.recheck_passes;
         self.rechecked_points += later.rechecked_points;
+        self.unsettled_phases += later.unsettled_phases;
         self.phases.force += later.phases.force;
         self.phases.constraints += later.phases.constraints;
         self.phases.other += later.phases.other;
