@@ -598,10 +598,10 @@ fn cancelled_velocity_is_absorbed_only_at_contacts_that_outrun_their_motion() {
 }
 
 /// Every constraint phase (one per accepted step or constraint rejection) is counted, and
-/// its re-check passes (at most `MAX_RECHECK_PASSES`, each over at least one point) with the points they
-/// tested. Large corrections make re-checks: the torso's moving shoulders push its skin by
-/// more than a tenth of ε_c; a skin resting without gravity is barely corrected and needs
-/// almost none.
+/// its re-check passes (at most `MAX_RECHECK_PASSES`, each over at least one point) with the
+/// points they tested. Large corrections make re-checks: the torso's moving shoulders push its
+/// skin by more than a tenth of ε_c; a skin resting without gravity is barely corrected and
+/// needs almost none.
 #[test]
 fn constraint_phases_count_their_rechecks() {
     let (mut m, motion) = model_and_motion("torso", 16);
@@ -636,8 +636,8 @@ fn constraint_phases_count_their_rechecks() {
 }
 
 /// The re-check passes run until the corrections settle: on the 16×16 torso's and penguin's
-/// motions (where at most 3 passes left 10 of about 500 phases each still correcting, with fat
-/// points up to millimetres deep) hardly any phase reaches the limit.
+/// motions (where at most 3 passes left 10 of their about 550 and 400 phases still correcting,
+/// with fat points up to millimetres deep) hardly any phase reaches the limit.
 #[test]
 fn rechecks_settle_before_their_limit() {
     for name in ["torso", "penguin"] {
