@@ -117,11 +117,11 @@ struct PassScratch {
     /// a sparse round (later rounds, re-checks) tests only these.
     gated: Vec<u32>,
     /// `gated_before[f]`: how many gated points are below `f` (`free + 1` entries), so a run's
-    /// gated points are a slice found in constant time ([`gated_in`]). Two binary searches per
-    /// run, done twice (to pick the runs, then to test them), were about a fifth of
-    /// `filter_run`'s time in their dependent compare-and-move chains (replacing them saved
-    /// about 1 % of the torso's wall time); this count is one pass over the gate bytes per
-    /// sparse round.
+    /// gated points are a slice found in constant time ([`gated_in`]). Both lists come from the
+    /// gate bytes ([`index_gates`]), once per sparse round. Two binary searches per run, done
+    /// twice (to pick the runs, then to test them), were about a fifth of `filter_run`'s time
+    /// in their dependent compare-and-move chains (replacing them saved about 1 % of the
+    /// torso's wall time).
     gated_before: Vec<u32>,
     /// Every free point is gated (the first round of a full pass).
     all_gated: bool,
@@ -379,7 +379,6 @@ pub fn enforce(
             q[f] = g[f] - n[f] * fat[f];
         }
     }
-    sc.gated.clear();
     match only {
         None => sc.gate.fill(1),
         Some(list) => {
@@ -389,10 +388,6 @@ pub fn enforce(
                     *g = 1;
                 }
             }
-            sc.gated
-                .extend(list.iter().copied().filter(|&f| (f as usize) < free));
-            sc.gated.sort_unstable();
-            sc.gated.dedup();
         }
     }
     sc.all_gated = only.is_none();
@@ -401,21 +396,19 @@ pub fn enforce(
     for round in 0..input.rounds.min(MAX_ROUNDS) {
         if round > 0 {
             let previous = (round - 1) as u8;
+            // Only the points moved in the previous round are gated now.
             for (g, r) in sc.gate.iter_mut().zip(&sc.points.moved_round) {
                 *g = u8::from(*r == previous);
             }
-            // Only the points moved in the previous round are gated now, listed in ascending
-            // order by a scan of the gates.
-            collect_hits(&sc.gate, &mut sc.gated);
             sc.all_gated = false;
         }
         let mut changed = 0usize;
         let everyone = sc.all_gated;
-        if !everyone && sc.gated.is_empty() {
-            break;
-        }
         if !everyone {
-            count_gated_before(&sc.gate, &mut sc.gated_before);
+            index_gates(&sc.gate, &mut sc.gated, &mut sc.gated_before);
+            if sc.gated.is_empty() {
+                break;
+            }
         }
         for (s_idx, s) in shapes.iter().enumerate() {
             let (a, b) = (
@@ -1077,23 +1070,22 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
     }
     sc.hit[len..].fill(0);
     collect_hits(&sc.hit, &mut sc.hit_index);
-    if owed.round > 0 {
-        let mut hits = std::mem::take(&mut sc.hit_index);
-        let (moved_round, last_shape) = (&sc.points.moved_round[..], &sc.points.last_shape[..]);
-        hits.retain(|&i| owed.test(moved_round, last_shape, a + i as usize));
-        sc.hit_index = hits;
-    }
+    // Only a first round gets here, and it owes every gated point a test.
+    debug_assert_eq!(owed.round, 0);
 }
 
 /// The gated points in `[a, b)`, a slice of the ascending list `gated`, by the counts of
-/// [`count_gated_before`].
+/// [`index_gates`].
 #[inline]
 fn gated_in<'a>(gated: &'a [u32], before: &[u32], a: usize, b: usize) -> &'a [u32] {
     &gated[before[a] as usize..before[b] as usize]
 }
 
-/// `before[f]` = the number of non-zero bytes of `gate` below `f`, for `f` in `0..=gate.len()`.
-fn count_gated_before(gate: &[u8], before: &mut Vec<u32>) {
+/// A sparse round's index of its gate bytes (0 or 1 per free point): `gated`, the gated points
+/// in ascending order, and `before[f]`, how many of them are below `f` (for `f` in
+/// `0..=gate.len()`).
+fn index_gates(gate: &[u8], gated: &mut Vec<u32>, before: &mut Vec<u32>) {
+    collect_hits(gate, gated);
     before.clear();
     before.reserve(gate.len() + 1);
     let mut count = 0u32;

@@ -1180,7 +1180,7 @@ enum CandidateTime {
 struct PhaseOutcome {
     /// The corrections of all its passes.
     outcome: constraints::ConstraintOutcome,
-    /// Re-check passes after the full pass (at most 3).
+    /// Re-check passes after the full pass (at most [`MAX_RECHECK_PASSES`]).
     recheck_passes: u32,
     /// Points those passes tested, summed.
     rechecked_points: u32,
