@@ -157,6 +157,36 @@ fn a_parameter_changed_in_the_panel_reaches_the_running_simulation() {
 }
 
 #[test]
+fn the_recheck_slider_changes_the_running_simulation_threshold() {
+    let (state, clock) = state();
+    let mut h = harness(state);
+    h.run();
+    let before = h.state().recheck_fraction;
+    assert_eq!(before, 0.1, "the character file's default");
+    let slider = h.get_by_role_and_label(egui::accesskit::Role::Slider, "re-check above (× ε_c)");
+    slider.focus();
+    h.run();
+    h.key_press(egui::Key::ArrowRight);
+    h.run();
+    let after = h.state().recheck_fraction;
+    assert!(after > before && after <= 1.0, "{before} -> {after}");
+    assert!(
+        h.state()
+            .pending_changes
+            .contains(&ParameterChange::RecheckFraction(after)),
+        "{:?}",
+        h.state().pending_changes
+    );
+    let mut renderer = CountingRenderer(0);
+    for n in 0..2u32 {
+        clock.set(Duration::from_millis(17) * n);
+        h.state_mut().run_frame(&clock, &mut renderer);
+    }
+    assert!(h.state().pending_changes.is_empty());
+    assert!(h.state().sim_error.is_none(), "{:?}", h.state().sim_error);
+}
+
+#[test]
 fn the_devices_panel_lists_the_roles_after_a_frame_and_tools_say_they_are_not_built() {
     let (state, clock) = state();
     let mut h = harness(state);

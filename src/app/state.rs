@@ -1,7 +1,7 @@
 //! The workstation's state and its frame work: the character and its simulation, the motion
 //! and time, the calibration and stereo settings, the device source, the navigation vehicle,
 //! the layers shown; and [`AppFrame`], which does one frame's work for the
-//! [`Scheduler`](super::scheduler::Scheduler) in the order of the paper's time-line.
+//! [`Scheduler`] in the order of the paper's time-line.
 //!
 //! Frames of reference: device poses arrive in the tracker frame and are carried into the
 //! physical (screen) frame by the calibration (`world_from_tracker`; the desktop stand-ins are
@@ -191,6 +191,8 @@ pub struct AppState {
     pub tolerances: Tolerances,
     /// Constraint tolerance ε_c in use, metres.
     pub epsilon_c_m: f32,
+    /// Re-check threshold in use, as a fraction of ε_c.
+    pub recheck_fraction: f32,
     /// Index of the motion played (none: the neutral posture).
     pub motion: Option<usize>,
     /// Character parameters as last applied.
@@ -292,6 +294,7 @@ impl AppState {
             integrator: IntegratorKind::Verlet,
             tolerances,
             epsilon_c_m: d.epsilon_c_m,
+            recheck_fraction: d.recheck_fraction,
             motion,
             params,
             // What the panel shows is what the model uses.

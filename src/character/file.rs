@@ -545,6 +545,39 @@ mod tests {
         );
     }
 
+    /// The re-check threshold is optional (files written before it existed load with the
+    /// default), written on save, and refused outside (0, 1].
+    #[test]
+    fn recheck_fraction_is_optional_and_checked() {
+        let text = arm_text();
+        assert!(text.contains("recheck_fraction = 0.1\n"), "saved: {text}");
+        let old = text.replace("recheck_fraction = 0.1\n", "");
+        let here = Path::new("recheck.toml");
+        let c = Character::from_toml_str(&old, here).expect("an older file loads");
+        assert_eq!(
+            c.simulation.recheck_fraction,
+            super::super::DEFAULT_RECHECK_FRACTION
+        );
+        let c = Character::from_toml_str(
+            &text.replace("recheck_fraction = 0.1", "recheck_fraction = 0.4"),
+            here,
+        )
+        .expect("0.4 is fine");
+        assert_eq!(c.simulation.recheck_fraction, 0.4);
+        for (bad, says) in [
+            ("0.0", "recheck_fraction must be in (0, 1], got 0"),
+            ("1.5", "recheck_fraction must be in (0, 1], got 1.5"),
+            ("-0.1", "recheck_fraction must be finite and >= 0, got -0.1"),
+            ("nan", "recheck_fraction must be finite and >= 0, got NaN"),
+        ] {
+            let m = load_error(&text.replace(
+                "recheck_fraction = 0.1",
+                &format!("recheck_fraction = {bad}"),
+            ));
+            assert!(m.contains(says), "{bad}: {m}");
+        }
+    }
+
     #[test]
     fn bad_spring_reference_is_named() {
         let text = arm_text();

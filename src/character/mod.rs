@@ -47,6 +47,13 @@ pub struct SimulationDefaults {
     pub k_perpendicular: f32,
     /// ε_c: largest position correction per step before the step is rejected, metres.
     pub epsilon_c_m: f32,
+    /// Re-check threshold as a fraction of ε_c (0 < f ≤ 1): a constraint correction longer
+    /// than `recheck_fraction · ε_c` turns its neighbours' normals enough that their fat points
+    /// are tested again in the same step. Larger is faster and leaves fat points deeper
+    /// (`docs/simulate.md`, "The re-check passes"). Optional in files (default
+    /// [`DEFAULT_RECHECK_FRACTION`]).
+    #[serde(default = "default_recheck_fraction")]
+    pub recheck_fraction: f32,
     /// ε_r: position error tolerance of the adaptive step control (eq. 11-12).
     pub epsilon_r: f32,
     /// r_threshold: position magnitude above which error control becomes relative, metres.
@@ -63,6 +70,20 @@ pub struct SimulationDefaults {
     pub euler_step_s: f32,
 }
 
+/// The re-check threshold of [`SimulationDefaults::recheck_fraction`] when a file gives none:
+/// one tenth of ε_c keeps the torso's median residual depth near 0.06 mm.
+pub const DEFAULT_RECHECK_FRACTION: f32 = 0.1;
+
+fn default_recheck_fraction() -> f32 {
+    DEFAULT_RECHECK_FRACTION
+}
+
+/// Whether `f` can be a [`SimulationDefaults::recheck_fraction`]: in (0, 1] (NaN is not). The
+/// one rule the file, the simulator's parameter change and the command line all check.
+pub fn is_recheck_fraction(f: f32) -> bool {
+    f > 0.0 && f <= 1.0
+}
+
 impl Default for SimulationDefaults {
     fn default() -> Self {
         Self {
@@ -70,6 +91,7 @@ impl Default for SimulationDefaults {
             k_parallel: 0.0,
             k_perpendicular: 1.0,
             epsilon_c_m: 0.005,
+            recheck_fraction: DEFAULT_RECHECK_FRACTION,
             epsilon_r: 1e-3,
             r_threshold_m: 1.0,
             epsilon_v: 1e-3,
@@ -87,6 +109,7 @@ impl SimulationDefaults {
             ("k_parallel", self.k_parallel),
             ("k_perpendicular", self.k_perpendicular),
             ("epsilon_c_m", self.epsilon_c_m),
+            ("recheck_fraction", self.recheck_fraction),
             ("epsilon_r", self.epsilon_r),
             ("r_threshold_m", self.r_threshold_m),
             ("epsilon_v", self.epsilon_v),
@@ -115,6 +138,12 @@ impl SimulationDefaults {
             if v <= 0.0 {
                 return Err(format!("simulation: {name} must be > 0, got {v}"));
             }
+        }
+        if !is_recheck_fraction(self.recheck_fraction) {
+            return Err(format!(
+                "simulation: recheck_fraction must be in (0, 1], got {}",
+                self.recheck_fraction
+            ));
         }
         if self.max_step_s < self.min_step_s {
             return Err(format!(

@@ -174,7 +174,8 @@ pub struct AdvanceReport {
     /// accepted steps and constraint rejections). Zero for models without a constraint phase.
     pub constraint_phases: u64,
     /// Re-check passes the constraint phases made after their full pass (passes over the
-    /// neighbourhoods of large corrections, whose normals turned; at most 8 per phase).
+    /// neighbourhoods of large corrections, whose normals turned; in the surface model at
+    /// most [`surface::MAX_RECHECK_PASSES`] per phase).
     pub recheck_passes: u64,
     /// Skin points those re-check passes tested, summed over the passes. Against the free
     /// points each full pass tests, this is the share of the constraint work the re-checks add.
@@ -309,6 +310,9 @@ pub enum ParameterChange {
     },
     /// ε_c: largest constraint correction before a step is rejected, metres.
     ConstraintTolerance(f32),
+    /// Re-check threshold of the constraint phase as a fraction of ε_c, in (0, 1] (see
+    /// [`crate::character::SimulationDefaults::recheck_fraction`]).
+    RecheckFraction(f32),
     /// Switches the integrator.
     Integrator(IntegratorKind),
     /// Replaces the step-size control parameters.

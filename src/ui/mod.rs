@@ -188,6 +188,23 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         state.epsilon_c_m = eps_mm * 1e-3;
         state.queue_change(ParameterChange::ConstraintTolerance(state.epsilon_c_m));
     }
+    let mut recheck = state.recheck_fraction;
+    if ui
+        .add(
+            egui::Slider::new(&mut recheck, 0.05..=0.5)
+                .logarithmic(true)
+                .text("re-check above (× ε_c)"),
+        )
+        .on_hover_text(
+            "Corrections longer than this re-test their neighbours in the same step. \
+             Larger is faster and leaves fat points deeper: above 0.2 the arm's fat points \
+             reach past ε_c.",
+        )
+        .changed()
+    {
+        state.recheck_fraction = recheck;
+        state.queue_change(ParameterChange::RecheckFraction(recheck));
+    }
 
     ui.separator();
     let mut ratio = state.scheduler.config().sim_per_real;

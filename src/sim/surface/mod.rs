@@ -74,6 +74,8 @@ struct Core {
     k_parallel: f32,
     k_perpendicular: f32,
     epsilon_c_m: f32,
+    /// Corrections longer than this fraction of ε_c send their neighbourhoods to the re-checks.
+    recheck_fraction: f32,
     /// The points the constraint phase moved in the last committed step: the next step's
     /// error estimate leaves their inward error to the constraints
     /// ([`SecondOrderSystem::absorbed_error`]). Part of the state, so a snapshot or checkpoint
@@ -713,6 +715,7 @@ impl Core {
             k_parallel: d.k_parallel,
             k_perpendicular: d.k_perpendicular,
             epsilon_c_m: d.epsilon_c_m,
+            recheck_fraction: d.recheck_fraction,
             contacts: Vec::new(),
             character,
         })
@@ -1067,6 +1070,14 @@ impl DeformationModel for SurfaceModel {
                 check_value("epsilon_c", *eps, true)?;
                 core.epsilon_c_m = *eps;
             }
+            ParameterChange::RecheckFraction(f) => {
+                if !crate::character::is_recheck_fraction(*f) {
+                    return Err(SimError::BadParameter(format!(
+                        "recheck_fraction {f} is not in (0, 1]"
+                    )));
+                }
+                core.recheck_fraction = *f;
+            }
             ParameterChange::Integrator(kind) => {
                 core.kind = *kind;
                 core.step_s = initial_step(*kind, &core.tolerances);
@@ -1200,7 +1211,7 @@ struct PhaseOutcome {
 /// −5 %, wombat −6 %: the passes beyond the third hold a handful of points, and the deep
 /// leftovers they remove cost the next step). With 20, every phase settled (the slowest in 17
 /// passes): the iteration converges, slowly at a few creases, and this cap bounds it.
-const MAX_RECHECK_PASSES: u32 = 8;
+pub const MAX_RECHECK_PASSES: u32 = 8;
 
 /// The constraint phase on the candidate in `w.x_new`/`w.v_new`: one full pass, then re-check
 /// passes over corrected neighbourhoods with refreshed normals until nothing moves (at most
@@ -1241,7 +1252,7 @@ fn constrain_candidate(
         k_parallel: core.k_parallel,
         k_perpendicular: core.k_perpendicular,
         max_speed_m_per_s,
-        recheck_m: 0.1 * core.epsilon_c_m,
+        recheck_m: core.recheck_fraction * core.epsilon_c_m,
         rounds: constraints::MAX_ROUNDS,
     };
     // The first pass makes one round over the shapes. A point that a later shape pushed into an
@@ -1264,9 +1275,8 @@ fn constrain_candidate(
     w.candidate_contacts.clear();
     record_contacts(&w.broad, &mut w.candidate_contacts);
     let (mut passes, mut rechecked_points) = (0, 0);
-    // Corrections below this do not warrant another pass.
-    let negligible_m = 0.1 * core.epsilon_c_m;
-    let mut last_corrected = if outcome.max_correction_m > negligible_m {
+    // Corrections no longer than the re-check threshold do not warrant another pass.
+    let mut last_corrected = if outcome.max_correction_m > input.recheck_m {
         outcome.corrected
     } else {
         0
@@ -1300,7 +1310,7 @@ fn constrain_candidate(
             &mut w.touched,
         );
         record_contacts(&w.broad, &mut w.candidate_contacts);
-        last_corrected = if second.max_correction_m > negligible_m {
+        last_corrected = if second.max_correction_m > input.recheck_m {
             second.corrected
         } else {
             0

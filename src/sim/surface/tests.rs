@@ -635,6 +635,46 @@ fn constraint_phases_count_their_rechecks() {
     );
 }
 
+/// The re-check threshold can be changed while simulating: a larger fraction of ε_c re-tests
+/// fewer points (the same 1 s of the 16×16 torso's motion), and the final fat points are still
+/// within ε_c of the surface; values outside (0, 1] are refused and change nothing.
+#[test]
+fn the_recheck_fraction_trades_rechecks_for_depth() {
+    let run = |fraction: f32| {
+        let (mut m, motion) = model_and_motion("torso", 16);
+        m.apply(&ParameterChange::RecheckFraction(fraction))
+            .expect("accepted");
+        let r = m.advance(1.0, &mut MotionPoses(&motion), &mut Unlimited, None);
+        assert!(r.reached_target && all_finite(&m));
+        let depth = m.max_depth_m();
+        (r.rechecked_points, depth, m.epsilon_c_m())
+    };
+    let (fine, fine_depth, eps) = run(0.1);
+    let (coarse, coarse_depth, _) = run(0.5);
+    eprintln!(
+        "re-checked points: {fine} at 0.1 ε_c, {coarse} at 0.5 ε_c; depths {fine_depth} {coarse_depth} m"
+    );
+    assert!(
+        2 * coarse < fine,
+        "{coarse} at 0.5 ε_c against {fine} at 0.1 ε_c"
+    );
+    assert!(
+        fine_depth < eps && coarse_depth < eps,
+        "{fine_depth} {coarse_depth}"
+    );
+    let (mut m, _) = model_and_motion("torso", 16);
+    for bad in [0.0, -0.1, 1.5, f32::NAN] {
+        let err = m
+            .apply(&ParameterChange::RecheckFraction(bad))
+            .expect_err("refused");
+        assert!(err.to_string().contains("recheck_fraction"), "{err}");
+    }
+    assert_eq!(
+        m.core.recheck_fraction,
+        crate::character::DEFAULT_RECHECK_FRACTION
+    );
+}
+
 /// The re-check passes run until the corrections settle: on the 16×16 torso's and penguin's
 /// motions (where at most 3 passes left 10 of their about 550 and 400 phases still correcting,
 /// with fat points up to millimetres deep) hardly any phase reaches the limit.
