@@ -44,6 +44,7 @@ fn simulate_prints_the_documented_json() {
         "recheck_passes_per_phase",
         "rechecked_points_per_phase",
         "unsettled_phases",
+        "recheck_fraction",
         "point_steps_per_second",
     ] {
         assert!(v[key].is_number(), "{key} missing in {v}");
@@ -130,6 +131,54 @@ fn simulate_table_and_resolution_and_every_integrator() {
     assert_eq!(v["skin_points"], 120);
 }
 
+/// `--recheck-fraction` overrides the character's re-check threshold: the report says which
+/// was used, and a larger one re-tests fewer points in the same motion.
+#[test]
+fn simulate_recheck_fraction_sets_the_threshold() {
+    let args = ["torso_16", "--seconds", "0.5"];
+    let default = simulate_json(&args);
+    assert_eq!(default["recheck_fraction"].as_f64(), Some(0.1));
+    let mut coarse = args.to_vec();
+    coarse.extend(["--recheck-fraction", "0.5"]);
+    let v = simulate_json(&coarse);
+    assert_eq!(v["recheck_fraction"].as_f64(), Some(0.5));
+    let points = |v: &serde_json::Value| {
+        v["rechecked_points_per_phase"].as_f64().expect("number")
+            * v["constraint_phases"].as_f64().expect("number")
+    };
+    assert!(
+        points(&v) < points(&default),
+        "{} re-checked points at 0.5 ε_c, {} at 0.1 ε_c",
+        points(&v),
+        points(&default)
+    );
+    let text = simulate(&coarse);
+    assert!(text.contains("above 0.5 ε_c"), "{text}");
+}
+
+/// `--sample-depth` reports the deepest fat point after every slice: ordered percentiles, the
+/// largest within ε_c (5 mm) and at least the final state's; without it the field is null.
+#[test]
+fn simulate_sample_depth_summarises_the_residual_depths() {
+    let args = ["penguin_16", "--seconds", "0.5"];
+    assert!(simulate_json(&args)["sampled_depth_m"].is_null());
+    let mut sampled = args.to_vec();
+    sampled.push("--sample-depth");
+    let v = simulate_json(&sampled);
+    let d = &v["sampled_depth_m"];
+    let get = |k: &str| d[k].as_f64().expect("number");
+    let (median, p90, max) = (get("median"), get("p90"), get("max"));
+    assert!(0.0 <= median && median <= p90 && p90 <= max, "{d}");
+    assert!(max < 0.005, "{d}");
+    // The last sample is the final state.
+    assert!(
+        max >= v["final_max_depth_m"].as_f64().expect("number"),
+        "{v}"
+    );
+    let text = simulate(&sampled);
+    assert!(text.contains("Deepest fat point"), "{text}");
+}
+
 #[test]
 fn simulate_bad_arguments_say_what_is_wrong() {
     for (args, needle) in [
@@ -145,6 +194,10 @@ fn simulate_bad_arguments_say_what_is_wrong() {
         (vec!["simulate", "arm_16", "--motion", "dance"], "dance"),
         (vec!["simulate", "arm_16", "--seconds", "0"], "--seconds"),
         (vec!["simulate", "arm_16", "--repeat", "0"], "--repeat"),
+        (
+            vec!["simulate", "arm_16", "--recheck-fraction", "2"],
+            "--recheck-fraction 2: must be in (0, 1]",
+        ),
     ] {
         let out = leman().args(&args).output().expect("runs");
         assert!(!out.status.success(), "{args:?} should fail");

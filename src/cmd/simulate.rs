@@ -44,6 +44,16 @@ pub struct Args {
     /// runs) with the fastest and slowest. Every run must take the same steps.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub repeat: u32,
+    /// Re-check threshold as a fraction of ε_c, in (0, 1] (default: the character's
+    /// `recheck_fraction`): larger is faster and leaves fat points deeper.
+    #[arg(long)]
+    pub recheck_fraction: Option<f32>,
+    /// After every 1/30 s slice, find the deepest fat point inside any muscle (brute force, not
+    /// timed) and report their median, 90th percentile and largest. The checks run between
+    /// the timed slices but evict the simulation's data from the caches, so wall times with
+    /// this option are slower than without.
+    #[arg(long)]
+    pub sample_depth: bool,
 }
 
 /// Smallest and largest accepted step, seconds.
@@ -51,6 +61,14 @@ pub struct Args {
 struct StepSecs {
     min: f64,
     max: f64,
+}
+
+/// The deepest fat point's depth inside a muscle, sampled after every 1/30 s slice, metres.
+#[derive(Debug, Serialize)]
+struct DepthSummary {
+    median: f32,
+    p90: f32,
+    max: f32,
 }
 
 /// Fractions of the simulation's wall time.
@@ -89,8 +107,13 @@ struct Report {
     phase_fraction: PhaseFraction,
     max_penetration_m: f32,
     final_max_depth_m: f32,
+    /// The deepest fat point after each 1/30 s slice (brute force, not timed), with
+    /// `--sample-depth`.
+    sampled_depth_m: Option<DepthSummary>,
     /// Mean skin points the constraint phase pushed out per accepted step.
     pushed_points_per_step: f64,
+    /// Re-check threshold used, as a fraction of ε_c.
+    recheck_fraction: f32,
     /// Constraint phases run (accepted steps and constraint rejections).
     constraint_phases: u64,
     /// Mean re-check passes per constraint phase.
@@ -169,6 +192,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_resolution(m, n)
             .with_context(|| format!("--resolution {text}"))?;
     }
+    if let Some(f) = args.recheck_fraction {
+        if !leman::character::is_recheck_fraction(f) {
+            bail!("--recheck-fraction {f}: must be in (0, 1]");
+        }
+        character.simulation.recheck_fraction = f;
+    }
     let motion = match &args.motion {
         Some(name) if name == "none" && character.motion(name).is_none() => None,
         Some(name) => Some(
@@ -203,9 +232,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let name = character.name.clone();
+    let character_recheck = character.simulation.recheck_fraction;
     let mut runs = Vec::with_capacity(args.repeat as usize);
     for k in 0..args.repeat {
-        let run = run_once(character.clone(), kind, motion.as_ref(), seconds)?;
+        let run = run_once(
+            character.clone(),
+            kind,
+            motion.as_ref(),
+            seconds,
+            args.sample_depth,
+        )?;
         if let Some(first) = runs.first() {
             run.same_as(first)
                 .with_context(|| format!("run {} of --repeat {}", k + 1, args.repeat))?;
@@ -263,7 +299,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         max_penetration_m: total.max_penetration_m,
         final_max_depth_m: model.max_depth_m(),
+        sampled_depth_m: args.sample_depth.then(|| depth_summary(&run.depths_m)),
         pushed_points_per_step: total.pushed_per_step().unwrap_or(0.0),
+        recheck_fraction: character_recheck,
         constraint_phases: total.constraint_phases,
         recheck_passes_per_phase: rechecks.0,
         rechecked_points_per_phase: rechecks.1,
@@ -294,6 +332,8 @@ struct Run {
     model: SurfaceModel,
     total: AdvanceReport,
     wall: Duration,
+    /// The deepest fat point inside any muscle after each 1/30 s slice, metres.
+    depths_m: Vec<f32>,
 }
 
 impl Run {
@@ -323,6 +363,7 @@ fn run_once(
     kind: IntegratorKind,
     motion: Option<&leman::character::Motion>,
     seconds: f64,
+    sample_depth: bool,
 ) -> anyhow::Result<Run> {
     let neutral = leman::character::Posture::neutral(&character.skeleton);
     let mut model = SurfaceModel::new(character, kind)?;
@@ -334,19 +375,50 @@ fn run_once(
         None => &mut fixed,
     };
     let mut total = AdvanceReport::default();
-    let start = clock.now();
+    let mut wall = Duration::ZERO;
+    let mut depths_m = Vec::new();
     let slice = 1.0 / 30.0;
     let mut target = 0.0f64;
     while target < seconds {
         target = (target + slice).min(seconds);
+        let start = clock.now();
         let r = model.advance(target, poses, &mut Unlimited, Some(&clock));
+        wall += clock.now().saturating_sub(start);
         total.merge(&r);
+        if sample_depth {
+            // Outside the timed part: a brute-force check of every point against every shape.
+            depths_m.push(model.max_depth_m());
+        }
         if !r.reached_target {
             break;
         }
     }
-    let wall = clock.now().saturating_sub(start);
-    Ok(Run { model, total, wall })
+    Ok(Run {
+        model,
+        total,
+        wall,
+        depths_m,
+    })
+}
+
+/// Median, 90th percentile and largest of `values` (non-finite ones left out; all 0 when
+/// none are left): nearest-rank percentiles of the sorted values.
+fn depth_summary(values: &[f32]) -> DepthSummary {
+    let mut v: Vec<f32> = values.iter().copied().filter(|d| d.is_finite()).collect();
+    v.sort_by(f32::total_cmp);
+    let rank = |p: f64| {
+        if v.is_empty() {
+            0.0
+        } else {
+            let k = ((p * v.len() as f64).ceil() as usize).clamp(1, v.len());
+            v[k - 1]
+        }
+    };
+    DepthSummary {
+        median: rank(0.5),
+        p90: rank(0.9),
+        max: rank(1.0),
+    }
 }
 
 fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Result<()> {
@@ -421,6 +493,16 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         r.max_penetration_m * 1000.0,
         r.final_max_depth_m * 1000.0
     )?;
+    if let Some(d) = &r.sampled_depth_m {
+        writeln!(
+            out,
+            "{:<28}{:.3} / {:.3} / {:.3} mm (median / p90 / max, every 1/30 s)",
+            "Deepest fat point",
+            d.median * 1000.0,
+            d.p90 * 1000.0,
+            d.max * 1000.0
+        )?;
+    }
     writeln!(
         out,
         "{:<28}{:.0} of {} per step",
@@ -428,12 +510,13 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
     )?;
     writeln!(
         out,
-        "{:<28}{:.2} passes, {:.0} points per constraint phase ({} phases, {} unsettled)",
+        "{:<28}{:.2} passes, {:.0} points per constraint phase ({} phases, {} unsettled; above {} ε_c)",
         "Re-checks",
         r.recheck_passes_per_phase,
         r.rechecked_points_per_phase,
         r.constraint_phases,
-        r.unsettled_phases
+        r.unsettled_phases,
+        r.recheck_fraction
     )?;
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
     write!(
