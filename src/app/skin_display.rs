@@ -48,9 +48,9 @@ fn grid_normals(points: &[Vec3], around: usize, along: usize) -> Vec<Vec3> {
 /// the skeleton) stay. Returns how many points moved. Points, fat or shapes that give
 /// non-finite numbers leave the point where it was, so nothing non-finite is produced.
 ///
-/// Shape by shape (in order, [`ROUNDS`] times over while anything moves): the fat points in the
+/// Shape by shape (in order, `ROUNDS` times over while anything moves): the fat points in the
 /// shape's bounding sphere and extent box are tested with the simulation's batched sign kernel
-/// and the inside ones projected by [`NEWTON_STEPS`] batched Newton steps along the gradient
+/// and the inside ones projected by `NEWTON_STEPS` batched Newton steps along the gradient
 /// (display accuracy: a step's error is about the square of the previous one over twice the
 /// curvature radius, so from 1 cm deep in a muscle of 3 cm radius two steps land within a
 /// tenth of a millimetre).

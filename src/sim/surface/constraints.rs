@@ -17,11 +17,11 @@
 //!   extent) stays below the margin, so no shape can reach a point that is not in its runs.
 //! - **Per shape, two stages.** A vectorised loop over the runs maps every fat point into the
 //!   shape frame and keeps those inside the shape's exact extent box (spheres: the exact test
-//!   and projection right there). The survivors form a [`Batch`] whose values and gradients
-//!   are computed by the vectorised kernels ([`super::kernels`]); points with `F < 0` are
+//!   and projection right there). The survivors form a `Batch` whose values and gradients
+//!   are computed by the vectorised kernels (`super::kernels`); points with `F < 0` are
 //!   projected by two batched Newton steps along the gradient (a scalar exact projection for
 //!   any that do not land within [`PROJECTION_TOLERANCE_M`]). The projections become world
-//!   moves, push directions and surface velocities in vectorised passes ([`super::moves`]);
+//!   moves, push directions and surface velocities in vectorised passes (`super::moves`);
 //!   only the writes into the per-point arrays go point by point.
 //! - **Rounds.** Shapes are visited in order and each sees the points the earlier ones moved
 //!   (Gauss-Seidel); a point pushed out of one muscle into an overlapping one is caught by the

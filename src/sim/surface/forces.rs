@@ -239,8 +239,8 @@ pub fn grid_normals(around: usize, along: usize, grid: &[Vec<f32>; 3], out: &mut
 
 /// Unit outward normals on the full grid like [`grid_normals`], but from differences over
 /// `stride` nodes each way (wrapping around, clamped along), SoA. With a stride of 1 it is
-/// [`grid_normals`]. Every node gets exactly [`normal_node_strided`]'s value (the stride around
-/// first limited to `M/2`), computed in vector runs (see [`strided_normals_pass`]).
+/// [`grid_normals`]. Every node gets exactly `normal_node_strided`'s value (the stride around
+/// first limited to `M/2`), computed in vector runs (see `strided_normals_pass`).
 pub fn grid_normals_strided(
     around: usize,
     along: usize,
