@@ -184,9 +184,13 @@ pub struct RenderTarget {
     /// The resolved colour texture (RENDER_ATTACHMENT | COPY_SRC | TEXTURE_BINDING).
     pub color: wgpu::Texture,
     /// The view to show the image with (e.g. registered as an egui texture): it reads the
-    /// stored sRGB bytes as gamma-encoded values (RGBA8 unorm over the sRGB texture), which is
-    /// what egui expects of a texture. Sampling it in a shader of your own gives sRGB values.
+    /// stored sRGB bytes as gamma-encoded values (RGBA8 unorm), which is what egui expects of
+    /// a texture. Sampling it in a shader of your own gives sRGB values. Where the backend can
+    /// reinterpret a texture's format (Vulkan, Metal, DX12) it is a unorm view of
+    /// [`Self::color`]; on GL, which cannot, it views a unorm copy that every draw refreshes.
     pub color_view: wgpu::TextureView,
+    /// The unorm copy behind [`Self::color_view`] on backends without view reinterpretation.
+    gamma_copy: Option<wgpu::Texture>,
     /// The view drawn into (the texture's own, sRGB, format: shaders write linear light).
     attachment_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
@@ -428,6 +432,12 @@ impl Renderer {
         };
         let samples = self.options.msaa_samples;
         let gamma_format = self.options.color_format.remove_srgb_suffix();
+        // GL has no texture view reinterpretation (wgpu's downlevel flag VIEW_FORMATS, which
+        // every other backend has): there the gamma view is of a unorm copy, refreshed by a
+        // texture copy (sRGB and unorm RGBA8 are copy-compatible) at the end of every draw.
+        let reinterpret = gamma_format == self.options.color_format
+            || self.device.adapter_info().backend != wgpu::Backend::Gl;
+        let reinterpreted = [gamma_format];
         let color = self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("leman colour"),
             size,
@@ -438,7 +448,19 @@ impl Renderer {
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::COPY_SRC
                 | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[gamma_format],
+            view_formats: if reinterpret { &reinterpreted } else { &[] },
+        });
+        let gamma_copy = (!reinterpret).then(|| {
+            self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("leman colour (gamma copy)"),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: gamma_format,
+                usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
         });
         let depth = self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("leman depth"),
@@ -464,13 +486,18 @@ impl Renderer {
                 })
                 .create_view(&wgpu::TextureViewDescriptor::default())
         });
-        Ok(RenderTarget {
-            attachment_view: color.create_view(&wgpu::TextureViewDescriptor::default()),
-            color_view: color.create_view(&wgpu::TextureViewDescriptor {
+        let color_view = match &gamma_copy {
+            Some(copy) => copy.create_view(&wgpu::TextureViewDescriptor::default()),
+            None => color.create_view(&wgpu::TextureViewDescriptor {
                 label: Some("leman colour (gamma view)"),
                 format: Some(gamma_format),
                 ..Default::default()
             }),
+        };
+        Ok(RenderTarget {
+            attachment_view: color.create_view(&wgpu::TextureViewDescriptor::default()),
+            color_view,
+            gamma_copy,
             color,
             depth_view: depth.create_view(&wgpu::TextureViewDescriptor::default()),
             msaa_view,
@@ -717,6 +744,13 @@ impl Renderer {
                     None => rp.draw(0..count, 0..1),
                 }
             }
+        }
+        if let Some(copy) = &target.gamma_copy {
+            encoder.copy_texture_to_texture(
+                target.color.as_image_copy(),
+                copy.as_image_copy(),
+                target.color.size(),
+            );
         }
         self.queue.submit([encoder.finish()]);
         self.last_report.passes = passes.len();
