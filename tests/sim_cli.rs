@@ -113,6 +113,14 @@ fn simulate_repeat_reports_the_median_run_of_identical_runs() {
     assert!((wall("slowdown") - mid / wall("sim_seconds")).abs() < 1e-12);
     let text = simulate(&repeated);
     assert!(text.contains("median of 3 runs"), "{text}");
+    // The depth samples of repeated runs are checked to agree, and are those of one run.
+    repeated.push("--sample-depth");
+    let mut sampled = args.to_vec();
+    sampled.push("--sample-depth");
+    assert_eq!(
+        simulate_json(&repeated)["sampled_depth_m"],
+        simulate_json(&sampled)["sampled_depth_m"]
+    );
 }
 
 #[test]

@@ -41,7 +41,8 @@ pub struct Args {
     pub json: bool,
     /// Run the simulation this many times, each from the character's initial state, and
     /// report the median run's wall time (for an even count, the slower of the two middle
-    /// runs) with the fastest and slowest. Every run must take the same steps.
+    /// runs) with the fastest and slowest. Every run must take the same steps (and, with
+    /// `--sample-depth`, leave the same depths).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub repeat: u32,
     /// Re-check threshold as a fraction of ε_c, in (0, 1] (default: the character's
@@ -349,6 +350,18 @@ impl Run {
         for (what, here, first) in counts {
             if here != first {
                 bail!("{what} {here}, the first run {first}: the simulation is not deterministic");
+            }
+        }
+        // With --sample-depth the states after every slice must agree too, to the bit.
+        let slices = self.depths_m.len().max(other.depths_m.len());
+        for k in 0..slices {
+            let (here, first) = (self.depths_m.get(k), other.depths_m.get(k));
+            if here.map(|d| d.to_bits()) != first.map(|d| d.to_bits()) {
+                bail!(
+                    "deepest fat point after slice {} is {here:?} m, in the first run {first:?} m: \
+                     the simulation is not deterministic",
+                    k + 1
+                );
             }
         }
         Ok(())
