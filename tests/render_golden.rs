@@ -2,7 +2,8 @@
 //! every stereo mode, compared with committed PNGs in `tests/golden/` (per-pixel tolerance and a
 //! maximum fraction of differing pixels), plus checks that each mode composes the eyes as it
 //! should (anaglyph channels, interleaved rows, side-by-side halves, alternating frames) and that
-//! a NaN vertex never reaches the GPU.
+//! a NaN vertex never reaches the GPU. Where the machine also has GL, the GL path (a refreshed
+//! copy behind the shown view) is checked on it too.
 //!
 //! Environment: `LEMAN_UPDATE_GOLDEN=1` rewrites the goldens; a missing golden is written (and is
 //! a failure when `LEMAN_REQUIRE_GPU=1`, as in CI). Without any GPU driver the tests print a loud
@@ -17,7 +18,9 @@ use leman::calibration::{CalibrationProfile, ScreenRect};
 use leman::pose::Pose;
 use leman::render::device_caps::gpu_required_by_env;
 use leman::render::reference::reference_scene;
-use leman::render::{DrawPass, GpuContext, Renderer, RendererOptions, RgbaImage, Scene};
+use leman::render::{
+    AdapterPreference, DrawPass, GpuContext, Renderer, RendererOptions, RgbaImage, Scene,
+};
 use leman::stereo::{
     Composition, OutputSettings, StereoMode, StereoViews, ViewSettings, compose, eye_views_for,
 };
@@ -177,6 +180,11 @@ fn compare(expected: &RgbaImage, actual: &RgbaImage) -> (usize, RgbaImage) {
 
 /// Compares with `tests/golden/NAME.png`, writing it when missing or asked to.
 fn check_golden(name: &str, actual: &RgbaImage) {
+    check_golden_within(name, actual, max_differing_fraction());
+}
+
+/// [`check_golden`] allowing `max_fraction` of the pixels to differ.
+fn check_golden_within(name: &str, actual: &RgbaImage, max_fraction: f64) {
     let path = golden_dir().join(format!("{name}.png"));
     let update = std::env::var("LEMAN_UPDATE_GOLDEN").is_ok_and(|v| v == "1");
     if update || !path.exists() {
@@ -193,7 +201,7 @@ fn check_golden(name: &str, actual: &RgbaImage) {
     let expected = RgbaImage::load_png(&path).expect("load golden");
     let (differing, diff) = compare(&expected, actual);
     let fraction = differing as f64 / (actual.width * actual.height) as f64;
-    if fraction > max_differing_fraction() {
+    if fraction > max_fraction {
         std::fs::create_dir_all(failure_dir()).expect("failure dir");
         let actual_path = failure_dir().join(format!("{name}.actual.png"));
         let diff_path = failure_dir().join(format!("{name}.diff.png"));
@@ -504,4 +512,56 @@ fn msaa_changes_only_edges() {
         ..RendererOptions::default()
     };
     assert!(Renderer::new(&gpu.device, &gpu.queue, bad).is_err());
+}
+
+/// On Vulkan the image egui is shown is the target itself; GL, which cannot reinterpret a
+/// texture's format, shows a copy that every draw refreshes. Run on GL when the machine has it
+/// (Mesa llvmpipe through EGL; a loud skip otherwise, whatever `LEMAN_REQUIRE_GPU` says, as
+/// GL is the fallback and not the renderer's main path): the target shows a copy, the copy
+/// holds exactly the drawn bytes after each of two different draws (the two eyes), and the
+/// left eye matches its golden within the other backends' tolerance.
+#[test]
+fn gl_shows_a_copy_that_every_draw_refreshes() {
+    if let Some(gpu) = gpu() {
+        let r = Renderer::new(&gpu.device, &gpu.queue, RendererOptions::default()).expect("r");
+        let target = r.create_target(WIDTH, HEIGHT).expect("target");
+        assert_eq!(
+            target.shows_a_copy(),
+            gpu.summary.backend == wgpu::Backend::Gl,
+            "{}",
+            gpu.summary
+        );
+    }
+    private_runtime_dir();
+    let gl = match GpuContext::new_headless_on(wgpu::Backends::GL, AdapterPreference::PreferCpu) {
+        Ok(gl) => gl,
+        Err(e) => {
+            use std::io::Write;
+            let _ = writeln!(
+                std::io::stderr(),
+                "\n*** SKIPPED gl_shows_a_copy_that_every_draw_refreshes: {e} ***\n"
+            );
+            return;
+        }
+    };
+    eprintln!("GL test on: {}", gl.summary);
+    let mut r = Renderer::new(&gl.device, &gl.queue, RendererOptions::default()).expect("r");
+    let target = r.create_target(WIDTH, HEIGHT).expect("target");
+    assert!(target.shows_a_copy());
+    let views = reference_views();
+    let mut drawn = Vec::new();
+    for view in [&views.left, &views.right] {
+        let pass = DrawPass::full(view.clip_from_world, view.position_m, WIDTH, HEIGHT);
+        r.render(&target, &reference_scene(), &[pass])
+            .expect("draw");
+        let image = r.read_image(&target).expect("read");
+        let shown = r.read_shown_image(&target).expect("read shown");
+        assert!(image.pixels == shown.pixels, "the shown copy is stale");
+        drawn.push(image);
+    }
+    assert!(
+        differing_pixels(&drawn[0], &drawn[1]) > 2000,
+        "the eyes differ"
+    );
+    check_golden_within("eye_left", &drawn[0], MAX_DIFFERING_FRACTION_OTHER_BACKENDS);
 }

@@ -129,6 +129,21 @@ pub fn padded_bytes_per_row(width: u32) -> u32 {
 impl Renderer {
     /// Copies the target's colour texture back to memory (waits for the GPU).
     pub fn read_image(&self, target: &RenderTarget) -> Result<RgbaImage, RenderError> {
+        self.read_texture(target, &target.color)
+    }
+
+    /// Copies back what [`RenderTarget::color_view`] shows (on GL its own copy of the colour
+    /// texture, refreshed by every draw; elsewhere the colour texture itself): the same bytes
+    /// as [`Self::read_image`] after any draw.
+    pub fn read_shown_image(&self, target: &RenderTarget) -> Result<RgbaImage, RenderError> {
+        self.read_texture(target, target.shown_texture())
+    }
+
+    fn read_texture(
+        &self,
+        target: &RenderTarget,
+        texture: &wgpu::Texture,
+    ) -> Result<RgbaImage, RenderError> {
         let format = target.format();
         if !matches!(
             format,
@@ -151,7 +166,7 @@ impl Renderer {
             });
         encoder.copy_texture_to_buffer(
             wgpu::TexelCopyTextureInfo {
-                texture: &target.color,
+                texture,
                 mip_level: 0,
                 origin: wgpu::Origin3d::ZERO,
                 aspect: wgpu::TextureAspect::All,

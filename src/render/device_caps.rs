@@ -111,11 +111,26 @@ impl GpuContext {
 
     /// A device without any window, with an explicit adapter preference.
     pub fn new_headless_with(preference: AdapterPreference) -> Result<Self, DeviceError> {
-        pollster::block_on(Self::new_headless_async(preference))
+        pollster::block_on(Self::new_headless_async(preference, None))
     }
 
-    async fn new_headless_async(preference: AdapterPreference) -> Result<Self, DeviceError> {
-        let descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    /// A device without any window on one of `backends` only, whatever `WGPU_BACKEND` says
+    /// (e.g. to test the GL path on a machine that also has Vulkan).
+    pub fn new_headless_on(
+        backends: wgpu::Backends,
+        preference: AdapterPreference,
+    ) -> Result<Self, DeviceError> {
+        pollster::block_on(Self::new_headless_async(preference, Some(backends)))
+    }
+
+    async fn new_headless_async(
+        preference: AdapterPreference,
+        only: Option<wgpu::Backends>,
+    ) -> Result<Self, DeviceError> {
+        let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        if let Some(only) = only {
+            descriptor.backends = only;
+        }
         let backends = descriptor.backends;
         let instance = wgpu::Instance::new(descriptor);
         let mut adapters = instance.enumerate_adapters(backends).await;

@@ -214,6 +214,18 @@ impl RenderTarget {
     pub fn format(&self) -> wgpu::TextureFormat {
         self.color.format()
     }
+
+    /// Whether [`Self::color_view`] views a copy of [`Self::color`] (GL) rather than the
+    /// texture itself.
+    pub fn shows_a_copy(&self) -> bool {
+        self.gamma_copy.is_some()
+    }
+
+    /// The texture behind [`Self::color_view`]: the gamma copy where there is one, else
+    /// [`Self::color`].
+    pub(crate) fn shown_texture(&self) -> &wgpu::Texture {
+        self.gamma_copy.as_ref().unwrap_or(&self.color)
+    }
 }
 
 /// What one frame drew and left out.
@@ -458,7 +470,9 @@ impl Renderer {
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
                 format: gamma_format,
-                usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
+                usage: wgpu::TextureUsages::COPY_DST
+                    | wgpu::TextureUsages::COPY_SRC
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
                 view_formats: &[],
             })
         });
