@@ -36,8 +36,14 @@ impl FrameRenderer for CountingRenderer {
 }
 
 fn state() -> (AppState, VirtualClock) {
+    state_with(|_| {})
+}
+
+/// [`state`] with the loaded character changed by `edit` first.
+fn state_with(edit: impl FnOnce(&mut leman::character::Character)) -> (AppState, VirtualClock) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/characters/torso_16.toml");
-    let character = setup::load_character(Some(&path)).expect("character");
+    let mut character = setup::load_character(Some(&path)).expect("character");
+    edit(&mut character);
     let model = setup::surface_model(&character, IntegratorKind::Verlet);
     assert!(model.is_ok(), "model: {:?}", model.as_ref().err());
     let clock = VirtualClock::new();
@@ -184,6 +190,28 @@ fn the_recheck_slider_changes_the_running_simulation_threshold() {
     }
     assert!(h.state().pending_changes.is_empty());
     assert!(h.state().sim_error.is_none(), "{:?}", h.state().sim_error);
+}
+
+/// Drawing the panels changes nothing by itself: values the character file may hold that a
+/// slider's range does not cover (re-check at 0.8 ε_c, ε_c of 30 mm) or that are finer than
+/// the slider shows (the torso's point mass 0.0078125 kg, shown to 5 decimals) are not clamped
+/// or rounded into the slider and sent to the simulation. Only what the state queued when it
+/// was made is pending.
+#[test]
+fn drawing_the_panels_does_not_rewrite_loaded_values() {
+    let (state, _clock) = state_with(|c| {
+        c.simulation.recheck_fraction = 0.8;
+        c.simulation.epsilon_c_m = 0.03;
+    });
+    let queued = state.pending_changes.clone();
+    let params = state.params;
+    let mut h = harness(state);
+    h.run();
+    h.run();
+    assert_eq!(h.state().recheck_fraction, 0.8);
+    assert_eq!(h.state().epsilon_c_m, 0.03);
+    assert_eq!(h.state().params, params);
+    assert_eq!(h.state().pending_changes, queued);
 }
 
 #[test]

@@ -24,6 +24,19 @@ pub const TOOL_SLOTS: [(&str, bool); 7] = [
     ("Liposuction", false),
 ];
 
+/// A slider over `range` that leaves the value it is given alone until the user moves it.
+/// egui's default clamps every shown value into the range and rounds it to the decimals shown,
+/// and reports that as a change, so drawing the panels rewrote what the character file says
+/// (at the first frame the torso's point mass 0.0078125 kg became 0.00781 kg, its tissue
+/// stiffness 15.8203125 N/m 15.82, and a second tolerance change was queued). With clamping of
+/// edits only, a loaded value stays exact; what the user sets stays within the range.
+fn slider<Num: egui::emath::Numeric>(
+    value: &mut Num,
+    range: std::ops::RangeInclusive<Num>,
+) -> egui::Slider<'_> {
+    egui::Slider::new(value, range).clamping(egui::SliderClamping::Edits)
+}
+
 /// The toolbar: tool slots (only navigation works yet) and the simulation switch.
 pub fn toolbar_ui(ui: &mut egui::Ui, state: &mut AppState) {
     ui.horizontal_wrapped(|ui| {
@@ -55,33 +68,33 @@ pub fn character_ui(ui: &mut egui::Ui, state: &mut AppState) {
         around * along
     ));
     ui.add(
-        egui::Slider::new(&mut p.elasticity_scale, 0.1..=10.0)
+        slider(&mut p.elasticity_scale, 0.1..=10.0)
             .logarithmic(true)
             .text("Skin elasticity ×"),
     );
     ui.add(
-        egui::Slider::new(&mut p.point_mass_kg, 1e-4..=0.1)
+        slider(&mut p.point_mass_kg, 1e-4..=0.1)
             .logarithmic(true)
             .max_decimals(5)
             .text("Point mass (kg)"),
     );
     ui.add(
-        egui::Slider::new(&mut p.point_damping_n_s_per_m, 0.0..=1.0)
+        slider(&mut p.point_damping_n_s_per_m, 0.0..=1.0)
             .max_decimals(4)
             .text("Point damping (N·s/m)"),
     );
     ui.add(
-        egui::Slider::new(&mut p.tissue_stiffness_n_per_m, 0.0..=500.0)
+        slider(&mut p.tissue_stiffness_n_per_m, 0.0..=500.0)
             .max_decimals(2)
             .text("Tissue stiffness (N/m)"),
     );
     ui.add(
-        egui::Slider::new(&mut p.tissue_damping_n_s_per_m, 0.0..=5.0)
+        slider(&mut p.tissue_damping_n_s_per_m, 0.0..=5.0)
             .max_decimals(3)
             .text("Tissue damping (N·s/m)"),
     );
     ui.add(
-        egui::Slider::new(&mut p.fat_m, 0.0..=0.05)
+        slider(&mut p.fat_m, 0.0..=0.05)
             .max_decimals(4)
             .step_by(0.001)
             .text("Fat (m)"),
@@ -118,7 +131,7 @@ pub fn character_ui(ui: &mut egui::Ui, state: &mut AppState) {
         ui.checkbox(&mut l.fat, "fat");
         ui.checkbox(&mut l.floor_grid, "floor");
     });
-    ui.add(egui::Slider::new(&mut state.skin_opacity, 0.1..=1.0).text("skin opacity"));
+    ui.add(slider(&mut state.skin_opacity, 0.1..=1.0).text("skin opacity"));
 }
 
 /// The simulation: on/off, integrator, tolerances, sim/real ratio and adapt, and the live
@@ -146,7 +159,7 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     let mut fixed_ms = t.fixed_step_s * 1e3;
     let mut changed = ui
         .add(
-            egui::Slider::new(&mut t.position_tolerance, 1e-6..=1e-2)
+            slider(&mut t.position_tolerance, 1e-6..=1e-2)
                 .logarithmic(true)
                 .max_decimals(6)
                 .text("position tolerance ε_r"),
@@ -154,21 +167,21 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         .changed();
     changed |= ui
         .add(
-            egui::Slider::new(&mut min_ms, 0.01..=5.0)
+            slider(&mut min_ms, 0.01..=5.0)
                 .logarithmic(true)
                 .text("min step (ms)"),
         )
         .changed();
     changed |= ui
         .add(
-            egui::Slider::new(&mut max_ms, 0.1..=40.0)
+            slider(&mut max_ms, 0.1..=40.0)
                 .logarithmic(true)
                 .text("max step (ms)"),
         )
         .changed();
     changed |= ui
         .add(
-            egui::Slider::new(&mut fixed_ms, 0.05..=10.0)
+            slider(&mut fixed_ms, 0.05..=10.0)
                 .logarithmic(true)
                 .text("fixed step (ms)"),
         )
@@ -182,7 +195,7 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     }
     let mut eps_mm = state.epsilon_c_m * 1e3;
     if ui
-        .add(egui::Slider::new(&mut eps_mm, 0.1..=20.0).text("constraint tolerance ε_c (mm)"))
+        .add(slider(&mut eps_mm, 0.1..=20.0).text("constraint tolerance ε_c (mm)"))
         .changed()
     {
         state.epsilon_c_m = eps_mm * 1e-3;
@@ -191,7 +204,7 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     let mut recheck = state.recheck_fraction;
     if ui
         .add(
-            egui::Slider::new(&mut recheck, 0.05..=0.5)
+            slider(&mut recheck, 0.05..=0.5)
                 .logarithmic(true)
                 .text("re-check above (× ε_c)"),
         )
@@ -210,7 +223,7 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     let mut ratio = state.scheduler.config().sim_per_real;
     if ui
         .add(
-            egui::Slider::new(&mut ratio, 0.01..=1.0)
+            slider(&mut ratio, 0.01..=1.0)
                 .logarithmic(true)
                 .text("sim / real time"),
         )
@@ -386,7 +399,7 @@ pub fn stereo_ui(ui: &mut egui::Ui, state: &mut AppState) {
         .ipd_override_m
         .map_or(profile_ipd_mm, |v| v * 1e3);
     if ui
-        .add(egui::Slider::new(&mut ipd_mm, 0.0..=80.0).text("IPD (mm)"))
+        .add(slider(&mut ipd_mm, 0.0..=80.0).text("IPD (mm)"))
         .changed()
     {
         state.view_settings.ipd_override_m = Some(ipd_mm * 1e-3);
