@@ -37,12 +37,19 @@ const MAX_DIFFERING_FRACTION: f64 = 0.003;
 /// grid's lines, none on the shaded surfaces).
 const MAX_DIFFERING_FRACTION_OTHER_BACKENDS: f64 = 0.012;
 
-/// The differing fraction allowed on the adapter the tests run on.
-fn max_differing_fraction() -> f64 {
-    match gpu().map(|g| g.summary.backend) {
-        Some(wgpu::Backend::Vulkan) | None => MAX_DIFFERING_FRACTION,
-        Some(_) => MAX_DIFFERING_FRACTION_OTHER_BACKENDS,
+/// The differing fraction allowed on `backend`.
+fn max_differing_fraction(backend: wgpu::Backend) -> f64 {
+    match backend {
+        wgpu::Backend::Vulkan => MAX_DIFFERING_FRACTION,
+        _ => MAX_DIFFERING_FRACTION_OTHER_BACKENDS,
     }
+}
+
+/// Prints a skip where it is seen: written to the stderr handle directly, since libtest
+/// captures `eprintln!`.
+fn say_skipped(what: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "\n*** SKIPPED {what} ***\n");
 }
 
 #[allow(unsafe_code)]
@@ -71,13 +78,7 @@ fn gpu() -> Option<&'static GpuContext> {
         }
         Err(e) if gpu_required_by_env() => panic!("LEMAN_REQUIRE_GPU=1 but no GPU: {e}"),
         Err(e) => {
-            // Written to the stderr handle directly: libtest captures `eprintln!`, and a skip
-            // must be seen.
-            use std::io::Write;
-            let _ = writeln!(
-                std::io::stderr(),
-                "\n*** SKIPPED render golden tests: {e} ***\n"
-            );
+            say_skipped(&format!("render golden tests: {e}"));
             None
         }
     })
@@ -178,13 +179,16 @@ fn compare(expected: &RgbaImage, actual: &RgbaImage) -> (usize, RgbaImage) {
     (differing, diff)
 }
 
-/// Compares with `tests/golden/NAME.png`, writing it when missing or asked to.
+/// Compares an image of the shared device with `tests/golden/NAME.png`, writing it when
+/// missing or asked to.
 fn check_golden(name: &str, actual: &RgbaImage) {
-    check_golden_within(name, actual, max_differing_fraction());
+    let backend = gpu().map_or(wgpu::Backend::Vulkan, |g| g.summary.backend);
+    check_golden_on(backend, name, actual);
 }
 
-/// [`check_golden`] allowing `max_fraction` of the pixels to differ.
-fn check_golden_within(name: &str, actual: &RgbaImage, max_fraction: f64) {
+/// [`check_golden`] for an image rendered on `backend`.
+fn check_golden_on(backend: wgpu::Backend, name: &str, actual: &RgbaImage) {
+    let max_fraction = max_differing_fraction(backend);
     let path = golden_dir().join(format!("{name}.png"));
     let update = std::env::var("LEMAN_UPDATE_GOLDEN").is_ok_and(|v| v == "1");
     if update || !path.exists() {
@@ -536,11 +540,7 @@ fn gl_shows_a_copy_that_every_draw_refreshes() {
     let gl = match GpuContext::new_headless_on(wgpu::Backends::GL, AdapterPreference::PreferCpu) {
         Ok(gl) => gl,
         Err(e) => {
-            use std::io::Write;
-            let _ = writeln!(
-                std::io::stderr(),
-                "\n*** SKIPPED gl_shows_a_copy_that_every_draw_refreshes: {e} ***\n"
-            );
+            say_skipped(&format!("gl_shows_a_copy_that_every_draw_refreshes: {e}"));
             return;
         }
     };
@@ -563,5 +563,5 @@ fn gl_shows_a_copy_that_every_draw_refreshes() {
         differing_pixels(&drawn[0], &drawn[1]) > 2000,
         "the two eyes drew nearly the same image, so the copy's refresh is not shown"
     );
-    check_golden_within("eye_left", &drawn[0], MAX_DIFFERING_FRACTION_OTHER_BACKENDS);
+    check_golden_on(gl.summary.backend, "eye_left", &drawn[0]);
 }

@@ -233,7 +233,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let name = character.name.clone();
-    let character_recheck = character.simulation.recheck_fraction;
     let mut runs = Vec::with_capacity(args.repeat as usize);
     for k in 0..args.repeat {
         let run = run_once(
@@ -302,7 +301,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         final_max_depth_m: model.max_depth_m(),
         sampled_depth_m: args.sample_depth.then(|| depth_summary(&run.depths_m)),
         pushed_points_per_step: total.pushed_per_step().unwrap_or(0.0),
-        recheck_fraction: character_recheck,
+        recheck_fraction: character.simulation.recheck_fraction,
         constraint_phases: total.constraint_phases,
         recheck_passes_per_phase: rechecks.0,
         rechecked_points_per_phase: rechecks.1,

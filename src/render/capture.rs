@@ -129,29 +129,25 @@ pub fn padded_bytes_per_row(width: u32) -> u32 {
 impl Renderer {
     /// Copies the target's colour texture back to memory (waits for the GPU).
     pub fn read_image(&self, target: &RenderTarget) -> Result<RgbaImage, RenderError> {
-        self.read_texture(target, &target.color)
+        self.read_texture(&target.color)
     }
 
     /// Copies back what [`RenderTarget::color_view`] shows (on GL its own copy of the colour
     /// texture, refreshed by every draw; elsewhere the colour texture itself): the same bytes
     /// as [`Self::read_image`] after any draw.
     pub fn read_shown_image(&self, target: &RenderTarget) -> Result<RgbaImage, RenderError> {
-        self.read_texture(target, target.shown_texture())
+        self.read_texture(target.shown_texture())
     }
 
-    fn read_texture(
-        &self,
-        target: &RenderTarget,
-        texture: &wgpu::Texture,
-    ) -> Result<RgbaImage, RenderError> {
-        let format = target.format();
+    fn read_texture(&self, texture: &wgpu::Texture) -> Result<RgbaImage, RenderError> {
+        let format = texture.format();
         if !matches!(
             format,
             wgpu::TextureFormat::Rgba8Unorm | wgpu::TextureFormat::Rgba8UnormSrgb
         ) {
             return Err(RenderError::UnsupportedReadbackFormat(format));
         }
-        let (width, height) = (target.width(), target.height());
+        let (width, height) = (texture.width(), texture.height());
         let padded = padded_bytes_per_row(width);
         let buffer = self.device().create_buffer(&wgpu::BufferDescriptor {
             label: Some("leman readback"),

@@ -169,6 +169,14 @@ impl GpuContext {
     }
 }
 
+/// Whether `device` can view a texture in another format of the same layout (an RGBA8 sRGB
+/// texture as RGBA8 unorm): wgpu's downlevel flag `VIEW_FORMATS`, which Vulkan, Metal and DX12
+/// have and the GL backend never has. A device does not report its downlevel flags, so this
+/// goes by its backend.
+pub fn reinterprets_texture_formats(device: &wgpu::Device) -> bool {
+    device.adapter_info().backend != wgpu::Backend::Gl
+}
+
 /// The device descriptor the renderer needs: default limits (downlevel for GL), no extra features.
 pub fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
     let base = if adapter.get_info().backend == wgpu::Backend::Gl {

@@ -444,11 +444,10 @@ impl Renderer {
         };
         let samples = self.options.msaa_samples;
         let gamma_format = self.options.color_format.remove_srgb_suffix();
-        // GL has no texture view reinterpretation (wgpu's downlevel flag VIEW_FORMATS, which
-        // every other backend has): there the gamma view is of a unorm copy, refreshed by a
+        // Without view reinterpretation (GL) the gamma view is of a unorm copy, refreshed by a
         // texture copy (sRGB and unorm RGBA8 are copy-compatible) at the end of every draw.
         let reinterpret = gamma_format == self.options.color_format
-            || self.device.adapter_info().backend != wgpu::Backend::Gl;
+            || super::device_caps::reinterprets_texture_formats(&self.device);
         let reinterpreted = [gamma_format];
         let color = self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("leman colour"),
