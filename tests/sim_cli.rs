@@ -243,3 +243,52 @@ fn simulate_motion_none_holds_the_neutral_posture() {
     assert!(v["motion"].is_null(), "{v}");
     assert!((v["sim_seconds"].as_f64().expect("number") - 0.1).abs() < 1e-6);
 }
+
+#[test]
+fn simulate_a_character_whose_forces_explode_reports_the_stall_and_fails() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("penguin_far_muscles.toml");
+    let source =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/characters/penguin_16.toml");
+    let mut c = leman::character::Character::load(&source).expect("example loads");
+    // Every tissue spring stretched by a kilometre: no step size survives the guard.
+    for s in &mut c.shapes {
+        s.joint_from_shape.position_m.y -= 1000.0;
+    }
+    c.save(&path).expect("saved");
+    for json in [false, true] {
+        let mut cmd = leman();
+        cmd.args([
+            "simulate",
+            path.to_str().expect("utf-8 path"),
+            "--seconds",
+            "0.2",
+        ]);
+        if json {
+            cmd.arg("--json");
+        }
+        let out = cmd.output().expect("runs");
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr),
+        );
+        assert_eq!(out.status.code(), Some(1), "{stdout}\n{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(
+            stderr.contains("the simulation stalled at t = 0.0000 s of 0.2 s"),
+            "{stderr}"
+        );
+        // The report is still printed, and says where it stopped.
+        if json {
+            let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+            assert_eq!(v["stalled_at_s"], 0.0, "{v}");
+            assert_eq!(v["steps"], 0, "{v}");
+            assert_eq!(v["nonfinite_events"], 8, "{v}");
+        } else {
+            assert!(stdout.contains("Stalled"), "{stdout}");
+        }
+    }
+    // A run that reaches its end reports no stall.
+    let v = simulate_json(&["penguin_16", "--seconds", "0.1"]);
+    assert!(v["stalled_at_s"].is_null(), "{v}");
+}

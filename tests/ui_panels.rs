@@ -198,6 +198,31 @@ fn the_recheck_slider_changes_the_running_simulation_threshold() {
 /// or rounded into the slider and sent to the simulation. Only what the state queued when it
 /// was made is pending.
 #[test]
+fn a_stalled_simulation_says_so_in_the_panel_and_a_running_one_does_not() {
+    let stalled = |moved_m: f32| {
+        let (state, clock) = state_with(|c| {
+            // Every tissue spring stretched by `moved_m`: out of range at any step size.
+            for s in &mut c.shapes {
+                s.joint_from_shape.position_m.y -= moved_m;
+            }
+        });
+        let mut h = harness(state);
+        let mut renderer = CountingRenderer(0);
+        for n in 0..2u32 {
+            clock.set(Duration::from_millis(17) * n);
+            h.state_mut().run_frame(&clock, &mut renderer);
+        }
+        h.run();
+        let shown = h
+            .query_by_label_contains("Stalled at t = 0.000 s")
+            .is_some();
+        (h.state().sim_stalled_at_s, shown)
+    };
+    assert_eq!(stalled(1000.0), (Some(0.0), true));
+    assert_eq!(stalled(0.0), (None, false));
+}
+
+#[test]
 fn drawing_the_panels_does_not_rewrite_loaded_values() {
     let (state, _clock) = state_with(|c| {
         c.simulation.recheck_fraction = 0.8;

@@ -22,8 +22,8 @@ use crate::devices::replay::DeviceSource;
 use crate::pose::Pose;
 use crate::render::scene::{Layers, Scene};
 use crate::sim::{
-    AdvanceReport, DeformationModel, IntegratorKind, ParameterChange, PoseSource, Selection,
-    SurfaceMesh, Tolerances,
+    AdvanceEnd, AdvanceReport, DeformationModel, IntegratorKind, ParameterChange, PoseSource,
+    Selection, SurfaceMesh, Tolerances,
 };
 use crate::stereo::{OutputSettings, StereoViews, ViewSettings, eye_views};
 use crate::tracking::{PredictorConfig, RoleTracker};
@@ -183,6 +183,10 @@ pub struct AppState {
     pub model: Option<Box<dyn DeformationModel + Send>>,
     /// Why there is no model, or the last refused parameter change.
     pub sim_error: Option<String>,
+    /// Simulated time, seconds, at which the model's guard last gave up (every attempt down to
+    /// the minimum step non-finite or exploding: the skin stands still there); cleared by the
+    /// next accepted step.
+    pub sim_stalled_at_s: Option<f64>,
     /// The skin is simulated while this is on.
     pub simulation_on: bool,
     /// The integrator in use.
@@ -290,6 +294,7 @@ impl AppState {
             shape_meshes,
             model,
             sim_error,
+            sim_stalled_at_s: None,
             simulation_on: true,
             integrator: IntegratorKind::Verlet,
             tolerances,
@@ -583,6 +588,17 @@ impl AppState {
             Some(clock),
         );
         self.table1.totals.merge(&report);
+        if report.end == AdvanceEnd::Stalled {
+            if self.sim_stalled_at_s.is_none() {
+                tracing::warn!(
+                    "the simulation stalled at t = {:.4} s: every attempt was non-finite or exploding",
+                    report.time_s
+                );
+            }
+            self.sim_stalled_at_s = Some(report.time_s);
+        } else if report.steps > 0 {
+            self.sim_stalled_at_s = None;
+        }
         let progress = SimProgress {
             steps: u32::try_from(report.steps).unwrap_or(u32::MAX),
             rejected: u32::try_from(report.rejected_steps).unwrap_or(u32::MAX),

@@ -13,8 +13,8 @@ use leman::character::{Character, Primitive};
 use leman::clock::{Clock, RealClock};
 use leman::sim::surface::SurfaceModel;
 use leman::sim::{
-    AdvanceReport, DeformationModel, FixedPosture, IntegratorKind, MotionPoses, PoseSource,
-    Unlimited,
+    AdvanceEnd, AdvanceReport, DeformationModel, FixedPosture, IntegratorKind, MotionPoses,
+    PoseSource, Unlimited,
 };
 
 /// Arguments of `leman simulate`.
@@ -124,6 +124,9 @@ struct Report {
     /// Constraint phases whose re-checks stopped at their limit still correcting.
     unsettled_phases: u64,
     nonfinite_events: u64,
+    /// Simulated time at which the guard gave up (every attempt non-finite or exploding),
+    /// seconds; `None` when the run reached its end.
+    stalled_at_s: Option<f64>,
     point_steps_per_second: f64,
 }
 
@@ -307,6 +310,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rechecked_points_per_phase: rechecks.1,
         unsettled_phases: total.unsettled_phases,
         nonfinite_events: total.nonfinite_events,
+        stalled_at_s: (total.end == AdvanceEnd::Stalled).then_some(sim_s),
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
     };
     // Written, not printed: a closed pipe (`| head`) is an error message, not a panic.
@@ -316,7 +320,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         print_table(&report, wall, &mut out)
     }
-    .context("writing the report to standard output")
+    .context("writing the report to standard output")?;
+    if let Some(t) = report.stalled_at_s {
+        bail!(
+            "the simulation stalled at t = {t:.4} s of {seconds} s: {} attempts in a row, \
+             shrinking to the minimum step, were non-finite or exploding, so the last good \
+             state was kept (the character's forces are out of range: look for a huge \
+             stiffness, a tiny mass, or a shape or tissue anchor far from the skin)",
+            leman::sim::surface::GUARD_ATTEMPTS
+        );
+    }
+    Ok(())
 }
 
 /// Index of the median of `walls` (for an even count, the slower of the two middle ones, so
@@ -401,7 +415,7 @@ fn run_once(
             // Outside the timed part: a brute-force check of every point against every shape.
             depths_m.push(model.max_depth_m());
         }
-        if !r.reached_target {
+        if !r.reached_target() {
             break;
         }
     }
@@ -531,6 +545,9 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         r.recheck_fraction
     )?;
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
+    if let Some(t) = r.stalled_at_s {
+        writeln!(out, "{:<28}at {t:.4} s (the guard gave up)", "Stalled")?;
+    }
     write!(
         out,
         "{:<28}{:.3} s simulated in {:.3} s",

@@ -137,13 +137,28 @@ impl PhaseTimes {
     }
 }
 
+/// How a [`DeformationModel::advance`] call ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AdvanceEnd {
+    /// The target time was reached.
+    ReachedTarget,
+    /// The step budget said no before the target was reached (the frame's time was used up).
+    BudgetSpent,
+    /// The guard gave up: several attempts in a row, each a quarter of the last one down to the
+    /// minimum step, were non-finite or exploding. The last good state was restored and the
+    /// call returned early. The model stays where it is until a parameter, the posture or the
+    /// state changes (a character whose forces are out of range stalls at every call).
+    Stalled,
+}
+
 /// What one or more [`DeformationModel::advance`] calls did.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AdvanceReport {
     /// Simulation time reached, seconds.
     pub time_s: f64,
-    /// Whether the target time was reached (false: the budget ran out first).
-    pub reached_target: bool,
+    /// How the (last) call ended.
+    pub end: AdvanceEnd,
     /// Accepted steps.
     pub steps: u64,
     /// Rejected attempts for any reason (error control, constraints, guard).
@@ -192,7 +207,7 @@ impl Default for AdvanceReport {
     fn default() -> Self {
         Self {
             time_s: 0.0,
-            reached_target: false,
+            end: AdvanceEnd::BudgetSpent,
             steps: 0,
             rejected_steps: 0,
             constraint_rejections: 0,
@@ -214,6 +229,11 @@ impl Default for AdvanceReport {
 }
 
 impl AdvanceReport {
+    /// Whether the (last) call reached its target time.
+    pub fn reached_target(&self) -> bool {
+        self.end == AdvanceEnd::ReachedTarget
+    }
+
     /// Mean skin points pushed out per accepted step (`None` before the first step).
     pub fn pushed_per_step(&self) -> Option<f64> {
         (self.steps > 0).then(|| self.pushed_points as f64 / self.steps as f64)
@@ -231,11 +251,11 @@ impl AdvanceReport {
         })
     }
 
-    /// Adds a later report into this one (counts summed, extremes combined, time and
-    /// `reached_target` taken from `later`).
+    /// Adds a later report into this one (counts summed, extremes combined, time and `end`
+    /// taken from `later`).
     pub fn merge(&mut self, later: &AdvanceReport) {
         self.time_s = later.time_s;
-        self.reached_target = later.reached_target;
+        self.end = later.end;
         self.steps += later.steps;
         self.rejected_steps += later.rejected_steps;
         self.constraint_rejections += later.constraint_rejections;
@@ -387,8 +407,8 @@ pub trait DeformationModel {
     fn time_s(&self) -> f64;
 
     /// Advances towards `target_time_s`, asking `budget` before every step attempt, with the
-    /// skeleton from `poses`. Stops at the target (the last step is shortened to land on it) or
-    /// when the budget says no. `clock`, when given, is read only to fill the report's phase
+    /// skeleton from `poses`. Stops at the target (the last step is shortened to land on it), when
+    /// the budget says no, or when the guard gives up (see [`AdvanceEnd`]). `clock`, when given, is read only to fill the report's phase
     /// times. Never leaves a non-finite state behind.
     fn advance(
         &mut self,

@@ -141,6 +141,16 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     if let Some(e) = &state.sim_error {
         ui.colored_label(egui::Color32::from_rgb(230, 120, 60), e);
     }
+    if let Some(t) = state.sim_stalled_at_s {
+        ui.colored_label(
+            egui::Color32::from_rgb(230, 80, 60),
+            format!(
+                "Stalled at t = {t:.3} s: every step, down to the minimum, was non-finite or \
+                 exploding, so the skin is held at its last good state. Lower a stiffness, \
+                 raise a mass or move a muscle nearer the skin."
+            ),
+        );
+    }
     let mut integrator = state.integrator;
     egui::ComboBox::from_label("Integrator")
         .selected_text(integrator_label(integrator))

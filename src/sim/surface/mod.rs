@@ -36,8 +36,8 @@ use glam::Vec3;
 
 use super::ode::{Integrator, IntegratorKind, SecondOrderSystem, Tolerances};
 use super::{
-    AdvanceReport, DeformationModel, ParameterChange, PoseSource, Selection, SimError, Snapshot,
-    StepBudget, SurfaceMesh,
+    AdvanceEnd, AdvanceReport, DeformationModel, ParameterChange, PoseSource, Selection, SimError,
+    Snapshot, StepBudget, SurfaceMesh,
 };
 use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
 use crate::clock::Clock;
@@ -854,6 +854,7 @@ impl DeformationModel for SurfaceModel {
         self.ensure_start(poses);
         let min_step = self.core.tolerances.min_step_s;
         let mut consecutive_failures = 0u32;
+        let mut stalled = false;
         while target_time_s.is_finite() && self.core.t_s < target_time_s - 1e-9 {
             if !budget.may_step() {
                 break;
@@ -912,10 +913,11 @@ impl DeformationModel for SurfaceModel {
                     report.nonfinite_events += 1;
                     consecutive_failures += 1;
                     self.core.step_s = (0.25 * h).max(min_step);
-                    if consecutive_failures >= 8 {
+                    if consecutive_failures >= GUARD_ATTEMPTS {
                         // Even tiny steps blow up: go back to the last good state and stop
                         // for this call (the caller sees nonfinite_events).
                         self.restore_checkpoint();
+                        stalled = true;
                         break;
                     }
                 }
@@ -927,7 +929,13 @@ impl DeformationModel for SurfaceModel {
         }
         self.save_checkpoint();
         report.time_s = self.core.t_s;
-        report.reached_target = self.core.t_s >= target_time_s - 1e-9;
+        report.end = if self.core.t_s >= target_time_s - 1e-9 {
+            AdvanceEnd::ReachedTarget
+        } else if stalled {
+            AdvanceEnd::Stalled
+        } else {
+            AdvanceEnd::BudgetSpent
+        };
         if let (Some(b), Some(c)) = (begin, clock) {
             let total = c.now().saturating_sub(b);
             report.phases.other = total
@@ -1212,6 +1220,12 @@ struct PhaseOutcome {
 /// leftovers they remove cost the next step). With 20, every phase settled (the slowest in 17
 /// passes): the iteration converges, slowly at a few creases, and this cap bounds it.
 pub const MAX_RECHECK_PASSES: u32 = 8;
+
+/// Attempts in a row that may be non-finite or exploding before [`SurfaceModel::advance`]
+/// gives up for the call ([`AdvanceEnd::Stalled`]). Each retry is a quarter of the last step
+/// (at least the minimum step), so from a 16 ms step the eighth is about 0.25 µs or the
+/// minimum.
+pub const GUARD_ATTEMPTS: u32 = 8;
 
 /// The constraint phase on the candidate in `w.x_new`/`w.v_new`: one full pass, then re-check
 /// passes over corrected neighbourhoods with refreshed normals until nothing moves (at most
