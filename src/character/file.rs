@@ -178,8 +178,22 @@ impl Character {
             }
         }
         let doc: FileDoc = toml::from_str(text).map_err(|e| syntax(e.to_string()))?;
-        let points = doc.skin.around as usize * doc.skin.along as usize;
         let s = doc.skin;
+        // The listed positions bound the per-point arrays a single value is expanded to: a
+        // resolution the positions do not match is refused before anything is allocated for
+        // it (`along = 1000000000` asked for 64 GB and aborted).
+        let points = s.around as usize * s.along as usize;
+        if s.positions_m.len() != points {
+            return Err(CharacterFileError::Invalid {
+                path: path.to_path_buf(),
+                problem: super::ValidationError(format!(
+                    "skin: positions_m has {} values, expected {points} (resolution {}×{})",
+                    s.positions_m.len(),
+                    s.around,
+                    s.along
+                )),
+            });
+        }
         let skin = Skin {
             around: s.around,
             along: s.along,
@@ -517,6 +531,20 @@ mod tests {
         let text = format!("{}fat_m = [0.01, 0.02]{}", &text[..start], &text[end..]);
         let m = load_error(&text);
         assert!(m.contains("skin: fat_m has 2 values, expected 48"), "{m}");
+    }
+
+    #[test]
+    fn a_resolution_the_positions_do_not_match_is_refused_before_allocating() {
+        let text = arm_text();
+        assert!(text.contains("\nalong = 6\n"));
+        // 8 × 10⁹ points would be 32 GB for one per-point array expanded from a single value.
+        let m = load_error(&text.replace("\nalong = 6\n", "\nalong = 1000000000\n"));
+        assert!(
+            m.contains(
+                "skin: positions_m has 48 values, expected 8000000000 (resolution 8×1000000000)"
+            ),
+            "{m}"
+        );
     }
 
     #[test]
