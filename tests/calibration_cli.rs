@@ -282,4 +282,19 @@ fn replayed_session_writes_the_expected_profile() {
         out_path.to_str().expect("path"),
     ]));
     assert!(e.contains("--profile"), "{e}");
+    // A session holds its own device profile: one passed beside it would be ignored, so the
+    // two are refused together rather than the profile silently dropped.
+    let e = err_text(&leman(&[
+        "calibrate",
+        "--profile",
+        "devices/fastrak-spaceball.toml",
+        "--replay",
+        "calibration/sessions/touch-corners.session",
+        "--out",
+        out_path.to_str().expect("path"),
+    ]));
+    assert!(
+        e.contains("--profile") && e.contains("cannot be used with") && e.contains("--replay"),
+        "{e}"
+    );
 }

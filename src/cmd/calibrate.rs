@@ -54,8 +54,9 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// Device profile (TOML) with a tracked wand, for the live procedure (required for it:
-    /// the desktop mouse has no 3D position).
-    #[arg(long, value_name = "DEVICES.toml")]
+    /// the desktop mouse has no 3D position). Not with `--replay`: a session holds the profile
+    /// it was recorded with.
+    #[arg(long, value_name = "DEVICES.toml", conflicts_with = "replay")]
     pub profile: Option<PathBuf>,
     /// Run the procedure on a recorded device session instead of live devices.
     #[arg(long, value_name = "SESSION")]
