@@ -135,6 +135,10 @@ pub struct SimProgress {
     pub rejected: u32,
     /// The simulation's time after the call, seconds.
     pub sim_time_s: f64,
+    /// The model's guard gave up in this call (every attempt non-finite or exploding): the
+    /// simulation cannot move on however much time it gets, so falling behind is not the
+    /// machine's fault and the skin resolution is left alone.
+    pub stalled: bool,
 }
 
 /// The work of one frame, done by the app (or by a fake in tests). The scheduler calls these
@@ -251,8 +255,11 @@ pub struct FrameRecord {
     pub sim_advanced_s: f64,
     /// Where the simulation should be after this frame, seconds.
     pub sim_target_s: f64,
-    /// Simulated time given up this frame because the machine could not keep up, seconds.
+    /// Simulated time given up this frame because the machine could not keep up (or the
+    /// simulation stalled), seconds.
     pub sim_lost_s: f64,
+    /// The simulation stalled this frame: its guard gave up (see [`SimProgress::stalled`]).
+    pub sim_stalled: bool,
     /// Wall time of the simulation steps, seconds.
     pub sim_wall_s: f64,
     /// Wall time of the two tracker reads, seconds.
@@ -472,6 +479,7 @@ impl Scheduler {
         let mut budget_at_sim_start = Duration::ZERO;
         let mut steps = 0u32;
         let mut rejected = 0u32;
+        let mut stalled = false;
         if deforming {
             budget_at_sim_start = deadline
                 .saturating_sub(sim_start)
@@ -495,6 +503,7 @@ impl Scheduler {
                 let spent = clock.now().saturating_sub(now);
                 steps = steps.saturating_add(progress.steps);
                 rejected = rejected.saturating_add(progress.rejected);
+                stalled |= progress.stalled;
                 if progress.steps > 0 {
                     self.step_cost_estimate = spent / progress.steps;
                 }
@@ -544,7 +553,7 @@ impl Scheduler {
             self.ratio_held = true;
         }
 
-        if self.config.adapt && self.config.pacing == Pacing::Live && deforming {
+        if self.config.adapt && self.config.pacing == Pacing::Live && deforming && !stalled {
             self.adapt(behind, sim_wall, budget_at_sim_start, &mut events);
         }
 
@@ -573,6 +582,7 @@ impl Scheduler {
             sim_advanced_s: advanced,
             sim_target_s: self.sim_target_s,
             sim_lost_s: sim_lost,
+            sim_stalled: stalled,
             sim_wall_s: sim_wall.as_secs_f64(),
             read_wall_s: read_wall.as_secs_f64(),
             update_wall_s: update_wall.as_secs_f64(),
@@ -691,6 +701,7 @@ mod tests {
         points: u32,
         sim_time_s: f64,
         deforming: bool,
+        stalled: bool,
         reads: Vec<TrackerRead>,
         rendered: Vec<TrackerRead>,
         budgets: Vec<Duration>,
@@ -708,6 +719,7 @@ mod tests {
                 points: 1024,
                 sim_time_s: 0.0,
                 deforming: true,
+                stalled: false,
                 reads: Vec::new(),
                 rendered: Vec::new(),
                 budgets: Vec::new(),
@@ -744,12 +756,22 @@ mod tests {
             // One step per call, never past the target.
             self.budgets.push(budget);
             self.clock.advance(self.step_cost_per_point * self.points);
+            if self.stalled {
+                // Eight failed attempts, and the time they took, for nothing.
+                return SimProgress {
+                    steps: 0,
+                    rejected: 8,
+                    sim_time_s: self.sim_time_s,
+                    stalled: true,
+                };
+            }
             let h = self.step_sim_s.min(target_sim_s - self.sim_time_s).max(0.0);
             self.sim_time_s += h;
             SimProgress {
                 steps: u32::from(h > 0.0),
                 rejected: 0,
                 sim_time_s: self.sim_time_s,
+                stalled: false,
             }
         }
         fn set_skin_points(&mut self, points: u32) {
@@ -932,6 +954,36 @@ mod tests {
         assert!(records.iter().any(|r| r.sim_lost_s > 0.0));
         // Adapt is off: the resolution stays.
         assert!(records.iter().all(|r| r.skin_points == 1024));
+    }
+
+    #[test]
+    fn a_stalled_simulation_is_logged_and_does_not_lower_the_resolution() {
+        let clock = VirtualClock::new();
+        let config = SchedulerConfig {
+            adapt: true,
+            ..SchedulerConfig::default()
+        };
+        let mut scheduler = Scheduler::new(config, 0.0).expect("config");
+        let mut work = FakeWork::new(&clock);
+        work.stalled = true;
+        let records = run(&mut scheduler, &clock, &mut work, 60);
+        assert!(records.iter().all(|r| r.sim_stalled && r.sim_steps == 0));
+        assert!(
+            records.iter().all(|r| r.skin_points == 1024),
+            "resolution kept"
+        );
+        assert!(
+            !records
+                .iter()
+                .flat_map(|r| r.events.iter())
+                .any(|e| matches!(e, SchedulerEvent::SkinResolution { .. })),
+            "no resolution change"
+        );
+        assert!(records[59].to_json_line().contains("\"sim_stalled\":true"));
+        // Once it moves again, the record says so (and a slow machine would adapt again).
+        work.stalled = false;
+        let records = run(&mut scheduler, &clock, &mut work, 5);
+        assert!(records.iter().all(|r| !r.sim_stalled && r.sim_steps > 0));
     }
 
     #[test]

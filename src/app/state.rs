@@ -603,6 +603,7 @@ impl AppState {
             steps: u32::try_from(report.steps).unwrap_or(u32::MAX),
             rejected: u32::try_from(report.rejected_steps).unwrap_or(u32::MAX),
             sim_time_s: report.time_s,
+            stalled: report.end == AdvanceEnd::Stalled,
         };
         if report.steps > 0 {
             self.refresh_surface();
