@@ -407,9 +407,10 @@ pub trait DeformationModel {
     fn time_s(&self) -> f64;
 
     /// Advances towards `target_time_s`, asking `budget` before every step attempt, with the
-    /// skeleton from `poses`. Stops at the target (the last step is shortened to land on it), when
-    /// the budget says no, or when the guard gives up (see [`AdvanceEnd`]). `clock`, when given, is read only to fill the report's phase
-    /// times. Never leaves a non-finite state behind.
+    /// skeleton from `poses`. Stops at the target (the last step is shortened to land on it),
+    /// when the budget says no, or when the guard gives up (see [`AdvanceEnd`]). `clock`, when
+    /// given, is read only to fill the report's phase times. Never leaves a non-finite state
+    /// behind.
     fn advance(
         &mut self,
         target_time_s: f64,
