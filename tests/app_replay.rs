@@ -189,3 +189,43 @@ fn a_missing_session_is_a_clear_error() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("no/such.session"), "{stderr}");
 }
+
+#[test]
+fn headless_replay_refuses_an_output_larger_than_the_device_allows_before_any_frame() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frames = dir.path().join("frames");
+    let runtime = dir.path().join("xdg");
+    std::fs::create_dir_all(&runtime).expect("runtime dir");
+    let run = |size: &str, stereo: &str| {
+        Command::new(env!("CARGO_BIN_EXE_leman"))
+            .current_dir(root())
+            .env("XDG_RUNTIME_DIR", &runtime)
+            .args(["replay", "--headless", "--no-sim", "--frame-count", "1"])
+            .args(["--stereo", stereo, "--size", size, "--frames"])
+            .arg(&frames)
+            .arg("devices/sessions/opentrack.session")
+            .output()
+            .expect("leman runs")
+    };
+    // Side by side (full) doubles the width: 16384 pixels is past the renderer's 8192 cap on
+    // any device. It used to "replay" every frame without rendering one, and exit 0.
+    let out = run("8192x64", "sbs-full");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("a 8192×64 display in side by side (full) needs a 16384×64 image"),
+        "{stderr}"
+    );
+    assert!(!frames.join("frame_00000.png").exists(), "no frame written");
+    // Half as wide fits.
+    let out = run("4096x64", "sbs-full");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(frames.join("frame_00000.png").exists());
+}

@@ -44,6 +44,12 @@ impl OffscreenStereo {
         self.display_size_px = [display_size_px[0].max(1), display_size_px[1].max(1)];
     }
 
+    /// Largest output image width and height the device allows, pixels (an output of a
+    /// stereo mode, [`crate::stereo::StereoMode::output_size_px`], must fit).
+    pub fn max_output_px(&self) -> u32 {
+        self.renderer.max_target_px()
+    }
+
     /// The display size.
     pub fn display_size(&self) -> [u32; 2] {
         self.display_size_px

@@ -94,6 +94,25 @@ pub enum ReplayRunError {
     /// A frame or the log could not be written.
     #[error(transparent)]
     Write(#[from] crate::files::WriteError),
+    /// The stereo mode's output image at this display size is larger than the render device
+    /// allows.
+    #[error(
+        "a {width}×{height} display in {mode} needs a {out_w}×{out_h} image, but this render device allows at most {max} pixels a side"
+    )]
+    OutputTooLarge {
+        /// The stereo mode's name.
+        mode: &'static str,
+        /// Display width, pixels.
+        width: u32,
+        /// Display height, pixels.
+        height: u32,
+        /// Output image width, pixels.
+        out_w: u32,
+        /// Output image height, pixels.
+        out_h: u32,
+        /// The device's limit, pixels.
+        max: u32,
+    },
     /// A frame could not be encoded or rendered.
     #[error("frame {frame}: {message}")]
     Frame {
@@ -114,6 +133,23 @@ pub fn replay_headless(
 ) -> Result<ReplaySummary, ReplayRunError> {
     let gpu = GpuContext::new_headless()?;
     let mut renderer = OffscreenStereo::new(&gpu.device, &gpu.queue, settings.display_size_px)?;
+    // Every frame would fail to render (and write no PNG): say so before running any.
+    let [width, height] = settings.display_size_px;
+    let [out_w, out_h] = settings
+        .output
+        .mode
+        .output_size_px(settings.display_size_px);
+    let max = renderer.max_output_px();
+    if out_w > max || out_h > max {
+        return Err(ReplayRunError::OutputTooLarge {
+            mode: settings.output.mode.label(),
+            width,
+            height,
+            out_w,
+            out_h,
+            max,
+        });
+    }
 
     let session_clock = VirtualClock::new();
     let duration = session.duration();

@@ -28,7 +28,13 @@ pub enum SetupError {
     /// A bad `WIDTHxHEIGHT`.
     #[error("bad size \"{0}\": expected WIDTHxHEIGHT, e.g. 1280x720")]
     Size(String),
+    /// A `WIDTHxHEIGHT` outside 1..=[`MAX_SIZE_PX`] pixels in either direction.
+    #[error("size \"{0}\": width and height must each be 1 to {MAX_SIZE_PX} pixels")]
+    SizeOutOfRange(String),
 }
+
+/// Largest window or frame width and height accepted, pixels.
+pub const MAX_SIZE_PX: u32 = 8192;
 
 /// Names of the default characters, first found wins.
 pub const DEFAULT_CHARACTERS: [&str; 2] = ["torso.toml", "penguin.toml"];
@@ -108,8 +114,8 @@ pub fn parse_size(text: &str) -> Result<[u32; 2], SetupError> {
     let (w, h) = text.trim().split_once(['x', 'X']).ok_or_else(bad)?;
     let w: u32 = w.trim().parse().map_err(|_| bad())?;
     let h: u32 = h.trim().parse().map_err(|_| bad())?;
-    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
-        return Err(bad());
+    if !(1..=MAX_SIZE_PX).contains(&w) || !(1..=MAX_SIZE_PX).contains(&h) {
+        return Err(SetupError::SizeOutOfRange(text.to_owned()));
     }
     Ok([w, h])
 }
@@ -132,6 +138,13 @@ mod tests {
         assert!(e.to_string().contains("holo"));
         assert_eq!(parse_size("1280x720").ok(), Some([1280, 720]));
         assert!(parse_size("1280").is_err());
-        assert!(parse_size("0x5").is_err());
+        assert!(
+            parse_size("1280xwide").is_err_and(|e| e.to_string().contains("expected WIDTHxHEIGHT"))
+        );
+        for big in ["0x5", "20000x20000", "8193x100"] {
+            let e = parse_size(big).expect_err(big).to_string();
+            assert!(e.contains("must each be 1 to 8192 pixels"), "{e}");
+        }
+        assert_eq!(parse_size("8192x8192").ok(), Some([8192, 8192]));
     }
 }

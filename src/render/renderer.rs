@@ -431,9 +431,14 @@ impl Renderer {
         &self.device
     }
 
+    /// Largest render target width and height this device allows, pixels.
+    pub fn max_target_px(&self) -> u32 {
+        self.device.limits().max_texture_dimension_2d
+    }
+
     /// A render target of `width × height` pixels in this renderer's colour format.
     pub fn create_target(&self, width: u32, height: u32) -> Result<RenderTarget, RenderError> {
-        let max = self.device.limits().max_texture_dimension_2d;
+        let max = self.max_target_px();
         if width == 0 || height == 0 || width > max || height > max {
             return Err(RenderError::BadTargetSize { width, height, max });
         }

@@ -63,6 +63,17 @@ impl StereoMode {
             StereoMode::FrameSequential => "frame-sequential",
         }
     }
+
+    /// Size of the output image, pixels (width, height), for a display of `display_size_px`:
+    /// twice the display's width for [`StereoMode::SideBySideFull`], the display's size
+    /// otherwise.
+    pub fn output_size_px(self, display_size_px: [u32; 2]) -> [u32; 2] {
+        let [w, h] = display_size_px;
+        match self {
+            StereoMode::SideBySideFull => [w.min(u32::MAX / 2) * 2, h],
+            _ => display_size_px,
+        }
+    }
 }
 
 /// Output settings chosen by the user.
@@ -251,7 +262,7 @@ pub fn compose(
             let w = w.min(u32::MAX / 2);
             let each = ViewportPx { width: w, ..full };
             (
-                [w * 2, h],
+                settings.mode.output_size_px(display_size_px),
                 vec![
                     pass(Eye::Left, left_view, each, true),
                     pass(Eye::Right, right_view, ViewportPx { x: w, ..each }, false),
@@ -465,6 +476,19 @@ mod tests {
                     "{mode:?}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn output_size_says_what_compose_makes() {
+        for mode in StereoMode::ALL {
+            let want = if mode == StereoMode::SideBySideFull {
+                [3842, 1081]
+            } else {
+                [1921, 1081]
+            };
+            assert_eq!(mode.output_size_px([1921, 1081]), want, "{mode:?}");
+            assert_eq!(recipe(mode, false).output_size_px, want, "{mode:?}");
         }
     }
 
