@@ -38,15 +38,22 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// A temporary folder (kept while the first value lives) with the path of a `frames` folder
+/// in it and a private `XDG_RUNTIME_DIR` for Mesa.
+fn scratch() -> (tempfile::TempDir, std::path::PathBuf, std::path::PathBuf) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frames = dir.path().join("frames");
+    let runtime = dir.path().join("xdg");
+    std::fs::create_dir_all(&runtime).expect("runtime dir");
+    (dir, frames, runtime)
+}
+
 #[test]
 fn headless_replay_of_a_fastrak_session_writes_frames_and_a_frame_log() {
     if !gpu_available() {
         return;
     }
-    let dir = tempfile::tempdir().expect("tempdir");
-    let frames = dir.path().join("frames");
-    let runtime = dir.path().join("xdg");
-    std::fs::create_dir_all(&runtime).expect("runtime dir");
+    let (_dir, frames, runtime) = scratch();
     let session = root().join("devices/sessions/fastrak-ascii.session");
     let output = Command::new(env!("CARGO_BIN_EXE_leman"))
         .current_dir(root())
@@ -195,10 +202,7 @@ fn headless_replay_refuses_an_output_larger_than_the_device_allows_before_any_fr
     if !gpu_available() {
         return;
     }
-    let dir = tempfile::tempdir().expect("tempdir");
-    let frames = dir.path().join("frames");
-    let runtime = dir.path().join("xdg");
-    std::fs::create_dir_all(&runtime).expect("runtime dir");
+    let (_dir, frames, runtime) = scratch();
     let run = |size: &str, stereo: &str| {
         Command::new(env!("CARGO_BIN_EXE_leman"))
             .current_dir(root())
