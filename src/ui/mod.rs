@@ -255,6 +255,8 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
             "measuring"
         } else if r.ratio_held {
             "held"
+        } else if r.sim_stalled {
+            "NOT held: the simulation stalled"
         } else {
             "NOT held: machine too slow"
         };
