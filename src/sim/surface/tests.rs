@@ -203,6 +203,36 @@ fn a_character_whose_forces_explode_stalls_and_says_so() {
     assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{r:?}");
 }
 
+/// Extreme panel values (the sliders' ends: tissue springs of 500 N/m on the lightest points,
+/// with explicit Euler at the largest fixed step) and back: whatever the guard did meanwhile,
+/// the model goes on from a finite state once the values are sane again.
+#[test]
+fn extreme_parameters_and_back_leave_a_model_that_goes_on() {
+    let (mut m, motion) = model_and_motion("torso", 16);
+    let mut poses = MotionPoses(&motion);
+    m.advance(0.2, &mut poses, &mut Unlimited, None);
+    let sane = m.snapshot();
+    let mut t = m.tolerances();
+    t.fixed_step_s = 0.01;
+    for change in [
+        ParameterChange::Integrator(IntegratorKind::Euler),
+        ParameterChange::Tolerances(t),
+        ParameterChange::Mass(Selection::All, 1e-4),
+        ParameterChange::TissueStiffness(Selection::All, 500.0),
+    ] {
+        m.apply(&change).expect("in range");
+    }
+    let wild = m.advance(0.4, &mut poses, &mut Unlimited, None);
+    // These values do blow up (the guard caught 81 attempts and stalled, when written).
+    assert!(wild.nonfinite_events > 0, "{wild:?}");
+    assert!(all_finite(&m), "{wild:?}");
+    m.restore(&sane).expect("same model");
+    let r = m.advance(0.6, &mut poses, &mut Unlimited, None);
+    assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{r:?}");
+    assert_eq!(r.nonfinite_events, 0, "{r:?}");
+    assert!(all_finite(&m));
+}
+
 #[test]
 fn guard_restores_the_last_good_state_after_an_injected_nan() {
     let (mut m, motion) = model_and_motion("penguin", 16);
