@@ -233,3 +233,59 @@ fn headless_replay_refuses_an_output_larger_than_the_device_allows_before_any_fr
     );
     assert!(frames.join("frame_00000.png").exists());
 }
+
+#[test]
+fn headless_replay_counts_the_frames_whose_simulation_stalled() {
+    if !gpu_available() {
+        return;
+    }
+    let (dir, frames, runtime) = scratch();
+    let mut character =
+        leman::character::Character::load(&root().join("assets/characters/torso_16.toml"))
+            .expect("example loads");
+    // Every tissue spring stretched by a kilometre: the guard gives up at every frame.
+    for s in &mut character.shapes {
+        s.joint_from_shape.position_m.y -= 1000.0;
+    }
+    let stalled = dir.path().join("stalled.toml");
+    character.save(&stalled).expect("saved");
+    let run = |character: &Path, json: bool| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_leman"));
+        cmd.current_dir(root())
+            .env("XDG_RUNTIME_DIR", &runtime)
+            .args([
+                "replay",
+                "--headless",
+                "--frame-count",
+                "4",
+                "--size",
+                "64x48",
+            ])
+            .arg("--character")
+            .arg(character)
+            .arg("--frames")
+            .arg(&frames)
+            .arg("devices/sessions/opentrack.session");
+        if json {
+            cmd.arg("--json");
+        }
+        let out = cmd.output().expect("leman runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let text = run(&stalled, false);
+    assert!(
+        text.contains("warning: the simulation stalled in 4 of 4 frames, first at t = 0.0000 s"),
+        "{text}"
+    );
+    let v: serde_json::Value = serde_json::from_str(&run(&stalled, true)).expect("JSON");
+    assert_eq!(v["stalled_frames"], 4, "{v}");
+    let fine = root().join("assets/characters/torso_16.toml");
+    let v: serde_json::Value = serde_json::from_str(&run(&fine, true)).expect("JSON");
+    assert_eq!(v["stalled_frames"], 0, "{v}");
+    assert!(!run(&fine, false).contains("stalled"));
+}

@@ -3,6 +3,7 @@
 
 use anyhow::Context;
 use leman::app::replay::{ReplaySettings, median_parts, replay_headless};
+use leman::app::scheduler::FrameRecord;
 use leman::app::setup;
 use leman::devices::session::Session;
 use leman::sim::IntegratorKind;
@@ -104,6 +105,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let summary = replay_headless(session, character, model, calibration, &settings)
         .with_context(|| format!("replaying {}", args.session.display()))?;
     let parts = median_parts(&summary.records);
+    let stalled: Vec<&FrameRecord> = summary.records.iter().filter(|r| r.sim_stalled).collect();
     if args.json {
         let (frame, sim, render, other) = parts.unwrap_or_default();
         let v = serde_json::json!({
@@ -112,6 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "log": log,
             "adapter": summary.adapter,
             "median_s": {"frame": frame, "sim": sim, "render": render, "other": other},
+            "stalled_frames": stalled.len(),
         });
         println!("{v}");
     } else {
@@ -130,6 +133,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 sim * 1e3,
                 render * 1e3,
                 other * 1e3
+            );
+        }
+        if let Some(first) = stalled.first() {
+            println!(
+                "warning: the simulation stalled in {} of {} frames, first at t = {:.4} s (every \
+                 attempt non-finite or exploding: the character's forces are out of range)",
+                stalled.len(),
+                summary.frames,
+                first.sim_time_s
             );
         }
     }
