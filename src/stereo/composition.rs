@@ -229,113 +229,92 @@ pub fn compose(
     };
     let half_w = w / 2;
     let half_h = h / 2;
-    let (output_size_px, passes) = match settings.mode {
-        StereoMode::Mono => (
-            display_size_px,
-            vec![pass(Eye::Center, views.center, full, true)],
-        ),
-        StereoMode::SideBySideHalf => (
-            display_size_px,
-            vec![
-                pass(
-                    Eye::Left,
-                    left_view,
-                    ViewportPx {
-                        width: half_w,
-                        ..full
-                    },
-                    true,
-                ),
-                pass(
-                    Eye::Right,
-                    right_view,
-                    ViewportPx {
-                        x: half_w,
-                        width: w - half_w,
-                        ..full
-                    },
-                    false,
-                ),
-            ],
-        ),
+    let passes = match settings.mode {
+        StereoMode::Mono => vec![pass(Eye::Center, views.center, full, true)],
+        StereoMode::SideBySideHalf => vec![
+            pass(
+                Eye::Left,
+                left_view,
+                ViewportPx {
+                    width: half_w,
+                    ..full
+                },
+                true,
+            ),
+            pass(
+                Eye::Right,
+                right_view,
+                ViewportPx {
+                    x: half_w,
+                    width: w - half_w,
+                    ..full
+                },
+                false,
+            ),
+        ],
         StereoMode::SideBySideFull => {
             let w = w.min(u32::MAX / 2);
             let each = ViewportPx { width: w, ..full };
-            (
-                settings.mode.output_size_px(display_size_px),
-                vec![
-                    pass(Eye::Left, left_view, each, true),
-                    pass(Eye::Right, right_view, ViewportPx { x: w, ..each }, false),
-                ],
-            )
+            vec![
+                pass(Eye::Left, left_view, each, true),
+                pass(Eye::Right, right_view, ViewportPx { x: w, ..each }, false),
+            ]
         }
-        StereoMode::TopBottom => (
-            display_size_px,
-            vec![
-                pass(
-                    Eye::Left,
-                    left_view,
-                    ViewportPx {
-                        height: half_h,
-                        ..full
-                    },
-                    true,
-                ),
-                pass(
-                    Eye::Right,
-                    right_view,
-                    ViewportPx {
-                        y: half_h,
-                        height: h - half_h,
-                        ..full
-                    },
-                    false,
-                ),
-            ],
-        ),
-        StereoMode::AnaglyphRedCyan => (
-            display_size_px,
-            vec![
-                EyePass {
-                    color_mask: ColorMask::RED,
-                    ..pass(Eye::Left, left_view, full, true)
+        StereoMode::TopBottom => vec![
+            pass(
+                Eye::Left,
+                left_view,
+                ViewportPx {
+                    height: half_h,
+                    ..full
                 },
-                EyePass {
-                    color_mask: ColorMask::CYAN,
-                    ..pass(Eye::Right, right_view, full, false)
+                true,
+            ),
+            pass(
+                Eye::Right,
+                right_view,
+                ViewportPx {
+                    y: half_h,
+                    height: h - half_h,
+                    ..full
                 },
-            ],
-        ),
-        StereoMode::RowInterleaved => (
-            display_size_px,
-            vec![
-                EyePass {
-                    row_parity: Some(Parity::Even),
-                    ..pass(Eye::Left, left_view, full, true)
-                },
-                EyePass {
-                    row_parity: Some(Parity::Odd),
-                    ..pass(Eye::Right, right_view, full, false)
-                },
-            ],
-        ),
-        StereoMode::FrameSequential => (
-            display_size_px,
-            vec![
-                EyePass {
-                    frame_parity: Some(Parity::Even),
-                    ..pass(Eye::Left, left_view, full, true)
-                },
-                EyePass {
-                    frame_parity: Some(Parity::Odd),
-                    ..pass(Eye::Right, right_view, full, true)
-                },
-            ],
-        ),
+                false,
+            ),
+        ],
+        StereoMode::AnaglyphRedCyan => vec![
+            EyePass {
+                color_mask: ColorMask::RED,
+                ..pass(Eye::Left, left_view, full, true)
+            },
+            EyePass {
+                color_mask: ColorMask::CYAN,
+                ..pass(Eye::Right, right_view, full, false)
+            },
+        ],
+        StereoMode::RowInterleaved => vec![
+            EyePass {
+                row_parity: Some(Parity::Even),
+                ..pass(Eye::Left, left_view, full, true)
+            },
+            EyePass {
+                row_parity: Some(Parity::Odd),
+                ..pass(Eye::Right, right_view, full, false)
+            },
+        ],
+        StereoMode::FrameSequential => vec![
+            EyePass {
+                frame_parity: Some(Parity::Even),
+                ..pass(Eye::Left, left_view, full, true)
+            },
+            EyePass {
+                frame_parity: Some(Parity::Odd),
+                ..pass(Eye::Right, right_view, full, true)
+            },
+        ],
     };
     Composition {
         mode: settings.mode,
-        output_size_px,
+        output_size_px: settings.mode.output_size_px(display_size_px),
         passes,
     }
 }
