@@ -183,17 +183,17 @@ impl Character {
         // resolution the positions do not match is refused before anything is allocated for
         // it (`along = 1000000000` asked for 64 GB and aborted).
         let points = s.around as usize * s.along as usize;
-        if s.positions_m.len() != points {
-            return Err(CharacterFileError::Invalid {
-                path: path.to_path_buf(),
-                problem: super::ValidationError(format!(
-                    "skin: positions_m has {} values, expected {points} (resolution {}×{})",
-                    s.positions_m.len(),
-                    s.around,
-                    s.along
-                )),
-            });
-        }
+        super::skin::check_len(
+            "positions_m",
+            s.positions_m.len(),
+            points,
+            s.around,
+            s.along,
+        )
+        .map_err(|problem| CharacterFileError::Invalid {
+            path: path.to_path_buf(),
+            problem: super::ValidationError(problem),
+        })?;
         let skin = Skin {
             around: s.around,
             along: s.along,

@@ -176,14 +176,7 @@ impl Skin {
         let m = self.around as usize;
         let mn = self.point_count();
         let check_len = |name: &str, len: usize, want: usize| {
-            if len == want {
-                Ok(())
-            } else {
-                Err(format!(
-                    "skin: {name} has {len} values, expected {want} (resolution {}×{})",
-                    self.around, self.along
-                ))
-            }
+            check_len(name, len, want, self.around, self.along)
         };
         check_len("bottom_ring_m", self.bottom_ring_m.len(), m)?;
         check_len("top_ring_m", self.top_ring_m.len(), m)?;
@@ -236,5 +229,23 @@ impl Skin {
             }
         }
         Ok(())
+    }
+}
+
+/// Checks that the skin array `name` has `want` values (per point, or per ring point) for a
+/// skin of `around × along` points; the error names the array, both counts and the resolution.
+pub(crate) fn check_len(
+    name: &str,
+    len: usize,
+    want: usize,
+    around: u32,
+    along: u32,
+) -> Result<(), String> {
+    if len == want {
+        Ok(())
+    } else {
+        Err(format!(
+            "skin: {name} has {len} values, expected {want} (resolution {around}×{along})"
+        ))
     }
 }
