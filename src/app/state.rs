@@ -588,7 +588,8 @@ impl AppState {
             Some(clock),
         );
         self.table1.totals.merge(&report);
-        if report.end == AdvanceEnd::Stalled {
+        let stalled = report.end == AdvanceEnd::Stalled;
+        if stalled {
             if self.sim_stalled_at_s.is_none() {
                 tracing::warn!(
                     "the simulation stalled at t = {:.4} s: every attempt was non-finite or exploding",
@@ -603,7 +604,7 @@ impl AppState {
             steps: u32::try_from(report.steps).unwrap_or(u32::MAX),
             rejected: u32::try_from(report.rejected_steps).unwrap_or(u32::MAX),
             sim_time_s: report.time_s,
-            stalled: report.end == AdvanceEnd::Stalled,
+            stalled,
         };
         if report.steps > 0 {
             self.refresh_surface();

@@ -3,7 +3,6 @@
 
 use anyhow::Context;
 use leman::app::replay::{ReplaySettings, median_parts, replay_headless};
-use leman::app::scheduler::FrameRecord;
 use leman::app::setup;
 use leman::devices::session::Session;
 use leman::sim::IntegratorKind;
@@ -105,7 +104,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let summary = replay_headless(session, character, model, calibration, &settings)
         .with_context(|| format!("replaying {}", args.session.display()))?;
     let parts = median_parts(&summary.records);
-    let stalled: Vec<&FrameRecord> = summary.records.iter().filter(|r| r.sim_stalled).collect();
+    let stalled_frames = summary.records.iter().filter(|r| r.sim_stalled).count();
     if args.json {
         let (frame, sim, render, other) = parts.unwrap_or_default();
         let v = serde_json::json!({
@@ -114,7 +113,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "log": log,
             "adapter": summary.adapter,
             "median_s": {"frame": frame, "sim": sim, "render": render, "other": other},
-            "stalled_frames": stalled.len(),
+            "stalled_frames": stalled_frames,
         });
         println!("{v}");
     } else {
@@ -135,13 +134,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 other * 1e3
             );
         }
-        if let Some(first) = stalled.first() {
+        if let Some(first) = summary.records.iter().find(|r| r.sim_stalled) {
             println!(
                 "warning: the simulation stalled in {} of {} frames, first at t = {:.4} s (every \
                  attempt non-finite or exploding: the character's forces are out of range)",
-                stalled.len(),
-                summary.frames,
-                first.sim_time_s
+                stalled_frames, summary.frames, first.sim_time_s
             );
         }
     }
