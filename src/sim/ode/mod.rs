@@ -590,7 +590,7 @@ pub fn integrate<S: SecondOrderSystem + ?Sized>(
 }
 
 // The Verlet passes over the state: each a single fused, vectorizable loop (see
-// `crate::sim::simd`), compiled for the baseline CPU and for AVX2.
+// `crate::sim::simd`), compiled for the baseline CPU, AVX2 and AVX-512.
 
 crate::sim::simd::multiversion! {
     /// Verlet's first pass: `x_half = x + h/2 v`.

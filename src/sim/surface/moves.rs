@@ -239,7 +239,7 @@ mod tests {
 
     use super::*;
     use crate::character::PROJECTION_TOLERANCE_M;
-    use crate::sim::simd::with_baseline_copies;
+    use crate::sim::simd::{SimdLevel, with_simd_level};
     use crate::test_noise::Noise;
 
     /// The per-point `glam` code these passes replace.
@@ -297,7 +297,7 @@ mod tests {
                 q[c].push(world[c]);
             }
         }
-        for baseline in [false, true] {
+        for level in SimdLevel::ALL {
             let mut b = MoveBatch::default();
             b.resize(n);
             let points: Vec<u32> = (0..n as u32).collect();
@@ -305,11 +305,7 @@ mod tests {
                 b.world_moves(&to_world, &p, &origin, settled);
                 b.finish(&points, &q, Some((&end_from_world, &start_to_world)), inv_h);
             };
-            if baseline {
-                with_baseline_copies(|| run(&mut b));
-            } else {
-                run(&mut b);
-            }
+            with_simd_level(level, || run(&mut b));
             let mut kept = 0;
             for i in 0..n {
                 let at = |a: &[Vec<f32>; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
@@ -324,15 +320,15 @@ mod tests {
                     settled,
                 );
                 match want {
-                    None => assert_eq!(b.keep[i], 0, "{i}"),
+                    None => assert_eq!(b.keep[i], 0, "{level:?} {i}"),
                     Some((d, normal, moved, vel)) => {
                         kept += 1;
-                        assert_eq!(b.keep[i], 1, "{i}");
-                        assert_eq!(at(&b.d), d, "{i}");
-                        assert_eq!(at(&b.normal), normal, "{i}");
-                        assert_eq!(b.len[i], d.length(), "{i}");
-                        assert_eq!(at(&b.q), moved, "{i}");
-                        assert_eq!(at(&b.surface_vel), vel, "{i}");
+                        assert_eq!(b.keep[i], 1, "{level:?} {i}");
+                        assert_eq!(at(&b.d), d, "{level:?} {i}");
+                        assert_eq!(at(&b.normal), normal, "{level:?} {i}");
+                        assert_eq!(b.len[i], d.length(), "{level:?} {i}");
+                        assert_eq!(at(&b.q), moved, "{level:?} {i}");
+                        assert_eq!(at(&b.surface_vel), vel, "{level:?} {i}");
                     }
                 }
             }

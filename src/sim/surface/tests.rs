@@ -557,12 +557,13 @@ fn pushed_points_count_distinct_contacts_per_step() {
     );
 }
 
-/// The AVX2 copies of the vectorised kernels (forces, Verlet passes, normals, constraint
-/// filters, superellipsoid values) and their baseline SSE2 copies do the same IEEE operations,
-/// so a simulation must come out bit for bit the same with either. On an AVX2 machine the
-/// baseline copies otherwise never run in the tests.
+/// The AVX2 and AVX-512 copies of the vectorised kernels (forces, Verlet passes, normals,
+/// constraint filters, superellipsoid values) and their baseline SSE2 copies do the same IEEE
+/// operations, so a simulation must come out bit for bit the same with any of them. On a
+/// machine with AVX2 or AVX-512 the lower copies otherwise never run in the tests.
 #[test]
-fn baseline_and_avx2_copies_simulate_the_same_bits() {
+fn every_simd_copy_simulates_the_same_bits() {
+    use crate::sim::simd::{SimdLevel, simd_level, with_simd_level};
     let run = |name: &str, res: u32| {
         let (mut m, motion) = model_and_motion(name, res);
         let mut poses = MotionPoses(&motion);
@@ -576,29 +577,35 @@ fn baseline_and_avx2_copies_simulate_the_same_bits() {
             .collect();
         (r.steps, r.rejected_steps, bits)
     };
-    assert!(!crate::sim::simd::with_baseline_copies(
-        crate::sim::simd::has_avx2_fma
-    ));
-    if !crate::sim::simd::has_avx2_fma() {
-        eprintln!("no AVX2 here: both runs take the baseline copies");
+    let best = simd_level();
+    if best < SimdLevel::Avx512 {
+        eprintln!("this CPU's best copies are {best:?}: the levels above it are not compared");
     }
     // The 64×64 arm's fat normals take the strided pass (stride 2).
     for (name, res) in [("torso", 16), ("wombat", 16), ("arm", 64)] {
-        let fast = run(name, res);
-        let baseline = crate::sim::simd::with_baseline_copies(|| run(name, res));
-        assert!(fast.0 > 20, "{name}: only {} steps", fast.0);
-        assert_eq!(
-            (fast.0, fast.1),
-            (baseline.0, baseline.1),
-            "{name}: steps differ"
-        );
-        let differing = fast
-            .2
-            .iter()
-            .zip(&baseline.2)
-            .filter(|(a, b)| a != b)
-            .count();
-        assert_eq!(differing, 0, "{name}: {differing} state values differ");
+        let baseline = with_simd_level(SimdLevel::Baseline, || run(name, res));
+        assert!(baseline.0 > 20, "{name}: only {} steps", baseline.0);
+        for level in SimdLevel::ALL
+            .into_iter()
+            .filter(|&l| l > SimdLevel::Baseline && l <= best)
+        {
+            let fast = with_simd_level(level, || run(name, res));
+            assert_eq!(
+                (fast.0, fast.1),
+                (baseline.0, baseline.1),
+                "{name} {level:?}: steps differ"
+            );
+            let differing = fast
+                .2
+                .iter()
+                .zip(&baseline.2)
+                .filter(|(a, b)| a != b)
+                .count();
+            assert_eq!(
+                differing, 0,
+                "{name} {level:?}: {differing} state values differ"
+            );
+        }
     }
 }
 
@@ -639,12 +646,22 @@ fn cancelled_velocity_is_absorbed_only_at_contacts_that_outrun_their_motion() {
     );
     assert_eq!(vel(3), Vec3::from(v_in), "in proportion to its motion");
     assert_eq!(vel(4), Vec3::from(v_in), "not a contact");
-    // The baseline copy gives the same bits.
-    let mut v_base = soa([v_in, v_in, [0.3, 0.0, 2.0], v_in, v_in]);
-    crate::sim::simd::with_baseline_copies(|| {
-        absorb_cancelled_velocity(free, h, &start, &unconstrained, &now, &mut v_base, &contact)
-    });
-    assert_eq!(v, v_base);
+    // Every copy (baseline, AVX2, AVX-512, as far as this CPU has them) gives the same bits.
+    for level in crate::sim::simd::SimdLevel::ALL {
+        let mut v_level = soa([v_in, v_in, [0.3, 0.0, 2.0], v_in, v_in]);
+        crate::sim::simd::with_simd_level(level, || {
+            absorb_cancelled_velocity(
+                free,
+                h,
+                &start,
+                &unconstrained,
+                &now,
+                &mut v_level,
+                &contact,
+            )
+        });
+        assert_eq!(v, v_level, "{level:?}");
+    }
 }
 
 /// Every constraint phase (one per accepted step or constraint rejection) is counted, and
