@@ -35,6 +35,28 @@ impl FrameRenderer for CountingRenderer {
     }
 }
 
+/// Fails while `failing` is set, with the message a too-large stereo output gives.
+struct FlakyRenderer {
+    failing: bool,
+    rendered: u64,
+}
+
+impl FrameRenderer for FlakyRenderer {
+    fn render(
+        &mut self,
+        _scene: &Scene,
+        _views: &StereoViews,
+        _output: &OutputSettings,
+        _frame_index: u64,
+    ) -> Result<(), String> {
+        if self.failing {
+            return Err("render target 16384×8192 px is larger than the device's 8192 px".into());
+        }
+        self.rendered += 1;
+        Ok(())
+    }
+}
+
 fn state() -> (AppState, VirtualClock) {
     state_with(|_| {})
 }
@@ -192,11 +214,6 @@ fn the_recheck_slider_changes_the_running_simulation_threshold() {
     assert!(h.state().sim_error.is_none(), "{:?}", h.state().sim_error);
 }
 
-/// Drawing the panels changes nothing by itself: values the character file may hold that a
-/// slider's range does not cover (re-check at 0.8 ε_c, ε_c of 30 mm) or that are finer than
-/// the slider shows (the torso's point mass 0.0078125 kg, shown to 5 decimals) are not clamped
-/// or rounded into the slider and sent to the simulation. Only what the state queued when it
-/// was made is pending.
 #[test]
 fn a_stalled_simulation_says_so_in_the_panel_and_a_running_one_does_not() {
     let stalled = |moved_m: f32| {
@@ -229,6 +246,11 @@ fn a_stalled_simulation_says_so_in_the_panel_and_a_running_one_does_not() {
     assert_eq!(stalled(0.0), (None, false, false, false));
 }
 
+/// Drawing the panels changes nothing by itself: values the character file may hold that a
+/// slider's range does not cover (re-check at 0.8 ε_c, ε_c of 30 mm) or that are finer than
+/// the slider shows (the torso's point mass 0.0078125 kg, shown to 5 decimals) are not clamped
+/// or rounded into the slider and sent to the simulation. Only what the state queued when it
+/// was made is pending.
 #[test]
 fn drawing_the_panels_does_not_rewrite_loaded_values() {
     let (state, _clock) = state_with(|c| {
@@ -263,4 +285,40 @@ fn the_devices_panel_lists_the_roles_after_a_frame_and_tools_say_they_are_not_bu
     let sphere = h.get_by_label("Sphere");
     assert!(sphere.accesskit_node().is_disabled());
     assert!(!h.get_by_label("Navigate").accesskit_node().is_disabled());
+}
+
+/// A render failure shows in the stereo panel while it lasts (not only in the log) and goes
+/// away with the next frame that renders.
+#[test]
+fn a_failing_render_says_why_in_the_panel_until_a_frame_renders() {
+    let (state, clock) = state();
+    let mut h = harness(state);
+    let mut renderer = FlakyRenderer {
+        failing: true,
+        rendered: 0,
+    };
+    let mut frame = 0u32;
+    let mut run = |h: &mut Harness<'static, AppState>, r: &mut FlakyRenderer| {
+        frame += 1;
+        clock.set(Duration::from_millis(17) * frame);
+        h.state_mut().run_frame(&clock, r);
+        h.run();
+    };
+    let shown = |h: &Harness<'static, AppState>| {
+        h.query_by_label_contains("Rendering failed: render target 16384×8192 px")
+            .is_some()
+    };
+    run(&mut h, &mut renderer);
+    assert!(shown(&h), "the failure is not in the panel");
+    assert_eq!(
+        h.state().render_failure.as_deref(),
+        Some("render target 16384×8192 px is larger than the device's 8192 px")
+    );
+    run(&mut h, &mut renderer);
+    assert!(shown(&h), "a second failing frame hid it");
+    renderer.failing = false;
+    run(&mut h, &mut renderer);
+    assert!(renderer.rendered > 0, "no frame rendered");
+    assert_eq!(h.state().render_failure, None);
+    assert!(!shown(&h), "still shown after a frame rendered");
 }

@@ -187,6 +187,10 @@ pub struct AppState {
     /// the minimum step non-finite or exploding: the skin stands still there); cleared by the
     /// next accepted step.
     pub sim_stalled_at_s: Option<f64>,
+    /// Why the last attempted render failed (for example a stereo output larger than the
+    /// device's largest render target), shown in the stereo panel; cleared by the next frame
+    /// that renders. Each new message is logged once, not every frame.
+    pub render_failure: Option<String>,
     /// The skin is simulated while this is on.
     pub simulation_on: bool,
     /// The integrator in use.
@@ -295,6 +299,7 @@ impl AppState {
             model,
             sim_error,
             sim_stalled_at_s: None,
+            render_failure: None,
             simulation_on: true,
             integrator: IntegratorKind::Verlet,
             tolerances,
@@ -368,20 +373,28 @@ impl AppState {
     ) -> FrameRecord {
         // The scheduler drives `self` as its frame work; run a copy and put it back.
         let mut scheduler = self.scheduler.clone();
-        let record = {
+        let (record, render_error, rendered) = {
             let mut frame = AppFrame {
                 state: self,
                 renderer,
                 clock,
                 render_error: None,
+                rendered: false,
             };
             let r = scheduler.run_frame(clock, &mut frame);
-            if let Some(e) = frame.render_error.take() {
-                tracing::warn!("render failed: {e}");
-            }
-            r
+            (r, frame.render_error.take(), frame.rendered)
         };
         self.scheduler = scheduler;
+        match render_error {
+            Some(e) => {
+                if self.render_failure.as_deref() != Some(e.as_str()) {
+                    tracing::warn!("render failed: {e}");
+                }
+                self.render_failure = Some(e);
+            }
+            None if rendered => self.render_failure = None,
+            None => {}
+        }
         let mut record = record;
         record.scene_wall_s = self.last_scene_wall.as_secs_f64();
         self.table1.wall_s += record.sim_wall_s;
@@ -685,6 +698,8 @@ pub struct AppFrame<'a> {
     pub clock: &'a dyn Clock,
     /// The last render error, if any.
     pub render_error: Option<String>,
+    /// A render was attempted this frame and succeeded.
+    pub rendered: bool,
 }
 
 impl FrameWork for AppFrame<'_> {
@@ -727,11 +742,12 @@ impl FrameWork for AppFrame<'_> {
         let scene = state.scene(read.wand.map(|w| w.pose));
         state.last_scene_wall = self.clock.now().saturating_sub(scene_start);
         let frame_index = state.scheduler_frames_hint();
-        if let Err(e) = self
+        match self
             .renderer
             .render(&scene, &views, &state.output, frame_index)
         {
-            self.render_error = Some(e);
+            Ok(()) => self.rendered = true,
+            Err(e) => self.render_error = Some(e),
         }
     }
 }

@@ -393,8 +393,14 @@ pub fn calibration_ui(ui: &mut egui::Ui, state: &AppState) {
     ));
 }
 
-/// Stereo: output mode, eye swap and IPD.
+/// Stereo: output mode, eye swap and IPD, and why rendering fails if it does.
 pub fn stereo_ui(ui: &mut egui::Ui, state: &mut AppState) {
+    if let Some(e) = &state.render_failure {
+        ui.colored_label(
+            egui::Color32::from_rgb(230, 80, 60),
+            format!("Rendering failed: {e}"),
+        );
+    }
     let mut mode = state.output.mode;
     egui::ComboBox::from_label("Stereo mode")
         .selected_text(mode.label())
