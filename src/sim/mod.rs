@@ -146,9 +146,10 @@ pub enum AdvanceEnd {
     /// The step budget said no before the target was reached (the frame's time was used up).
     BudgetSpent,
     /// The guard gave up: several attempts in a row, each a quarter of the last one down to the
-    /// minimum step, were non-finite or exploding. The last good state was restored and the
-    /// call returned early. The model stays where it is until a parameter, the posture or the
-    /// state changes (a character whose forces are out of range stalls at every call).
+    /// minimum step, were non-finite or exploding. The call returned early at the last
+    /// accepted state (the steps accepted before the failures are kept; [`AdvanceReport`]'s
+    /// `time_s` is where it stopped). The model stays there until a parameter, the posture or
+    /// the state changes (a character whose forces are out of range stalls at every call).
     Stalled,
 }
 

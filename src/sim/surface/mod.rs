@@ -854,6 +854,8 @@ impl DeformationModel for SurfaceModel {
         self.ensure_start(poses);
         let min_step = self.core.tolerances.min_step_s;
         let mut consecutive_failures = 0u32;
+        // The planned step before the current run of failures (restored if the guard gives up).
+        let mut step_before_failures = self.core.step_s;
         let mut stalled = false;
         while target_time_s.is_finite() && self.core.t_s < target_time_s - 1e-9 {
             if !budget.may_step() {
@@ -911,12 +913,19 @@ impl DeformationModel for SurfaceModel {
                 Attempt::NonFinite => {
                     report.rejected_steps += 1;
                     report.nonfinite_events += 1;
+                    if consecutive_failures == 0 {
+                        step_before_failures = self.core.step_s;
+                    }
                     consecutive_failures += 1;
                     self.core.step_s = (0.25 * h).max(min_step);
                     if consecutive_failures >= GUARD_ATTEMPTS {
-                        // Even tiny steps blow up: go back to the last good state and stop
-                        // for this call (the report says `Stalled`).
-                        self.restore_checkpoint();
+                        // Even tiny steps blow up from here: stop for this call (the report
+                        // says `Stalled`). A failed attempt changes nothing, so the state is
+                        // still the last accepted one, which passed the guard: it stays, with
+                        // the step it had, and the steps accepted before it in this call are
+                        // kept (going back to the call's start would throw them away and redo
+                        // them, to the same stall, at the next call).
+                        self.core.step_s = step_before_failures;
                         stalled = true;
                         break;
                     }

@@ -203,6 +203,41 @@ fn a_character_whose_forces_explode_stalls_and_says_so() {
     assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{r:?}");
 }
 
+/// A model that runs for a while and then blows up at every step size stalls at its last
+/// accepted state: the steps it took in the call are kept (not undone back to the call's
+/// start), the report's time is where it stopped, and the next call stalls there at once
+/// instead of redoing them.
+#[test]
+fn a_stall_keeps_the_steps_accepted_before_it() {
+    let (mut m, motion) = model_and_motion("torso", 16);
+    let mut poses = MotionPoses(&motion);
+    m.advance(0.2, &mut poses, &mut Unlimited, None);
+    m.apply(&ParameterChange::Integrator(IntegratorKind::Euler))
+        .expect("accepted");
+    let mut t = m.tolerances();
+    t.fixed_step_s = 0.01;
+    m.apply(&ParameterChange::Tolerances(t)).expect("accepted");
+    m.apply(&ParameterChange::Mass(Selection::All, 1e-4))
+        .expect("in range");
+    m.apply(&ParameterChange::TissueStiffness(Selection::All, 500.0))
+        .expect("in range");
+    let r = m.advance(0.5, &mut poses, &mut Unlimited, None);
+    assert_eq!(r.end, AdvanceEnd::Stalled, "{r:?}");
+    assert!(r.steps > 10, "it ran before it stalled: {r:?}");
+    assert!(
+        r.time_s > 0.2 + 1e-6,
+        "the accepted steps were undone: {r:?}"
+    );
+    assert_eq!(m.time_s(), r.time_s);
+    assert!(all_finite(&m));
+    let kept = (m.core.x.clone(), m.core.v.clone());
+    let again = m.advance(0.5, &mut poses, &mut Unlimited, None);
+    assert_eq!(again.end, AdvanceEnd::Stalled, "{again:?}");
+    assert_eq!((again.steps, again.time_s), (0, r.time_s), "{again:?}");
+    assert_eq!(again.nonfinite_events, u64::from(GUARD_ATTEMPTS));
+    assert_eq!((m.core.x.clone(), m.core.v.clone()), kept);
+}
+
 #[test]
 fn guard_restores_the_last_good_state_after_an_injected_nan() {
     let (mut m, motion) = model_and_motion("penguin", 16);
