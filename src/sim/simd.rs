@@ -87,17 +87,19 @@ pub fn with_simd_level<R>(level: SimdLevel, f: impl FnOnce() -> R) -> R {
     out
 }
 
-/// The best level the CPU running this supports (std caches the feature tests, so this is
-/// cheap).
+/// The best level the CPU running this supports: the feature tests run once, and every call
+/// after that is one atomic load (every `multiversion!` call dispatches through this, so it is
+/// on the simulation's hot path).
 #[inline]
 pub fn simd_level() -> SimdLevel {
-    let detected = detected_level();
+    static DETECTED: std::sync::OnceLock<SimdLevel> = std::sync::OnceLock::new();
+    let detected = *DETECTED.get_or_init(detected_level);
     #[cfg(test)]
     let detected = detected.min(LEVEL_CAP.with(|c| c.get()));
     detected
 }
 
-#[inline]
+/// The feature tests behind [`simd_level`].
 fn detected_level() -> SimdLevel {
     #[cfg(target_arch = "x86_64")]
     {
