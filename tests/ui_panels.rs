@@ -35,25 +35,25 @@ impl FrameRenderer for CountingRenderer {
     }
 }
 
-/// Fails while `failing` is set, with the message a too-large stereo output gives.
+/// A [`CountingRenderer`] that fails while `failing` is set, with the message a too-large
+/// stereo output gives.
 struct FlakyRenderer {
     failing: bool,
-    rendered: u64,
+    counting: CountingRenderer,
 }
 
 impl FrameRenderer for FlakyRenderer {
     fn render(
         &mut self,
-        _scene: &Scene,
-        _views: &StereoViews,
-        _output: &OutputSettings,
-        _frame_index: u64,
+        scene: &Scene,
+        views: &StereoViews,
+        output: &OutputSettings,
+        frame_index: u64,
     ) -> Result<(), String> {
         if self.failing {
             return Err("render target 16384×8192 px is larger than the device's 8192 px".into());
         }
-        self.rendered += 1;
-        Ok(())
+        self.counting.render(scene, views, output, frame_index)
     }
 }
 
@@ -295,7 +295,7 @@ fn a_failing_render_says_why_in_the_panel_until_a_frame_renders() {
     let mut h = harness(state);
     let mut renderer = FlakyRenderer {
         failing: true,
-        rendered: 0,
+        counting: CountingRenderer(0),
     };
     let mut frame = 0u32;
     let mut run = |h: &mut Harness<'static, AppState>, r: &mut FlakyRenderer| {
@@ -318,7 +318,7 @@ fn a_failing_render_says_why_in_the_panel_until_a_frame_renders() {
     assert!(shown(&h), "a second failing frame hid it");
     renderer.failing = false;
     run(&mut h, &mut renderer);
-    assert!(renderer.rendered > 0, "no frame rendered");
+    assert!(renderer.counting.0 > 0, "no frame rendered");
     assert_eq!(h.state().render_failure, None);
     assert!(!shown(&h), "still shown after a frame rendered");
 }

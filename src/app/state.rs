@@ -373,26 +373,25 @@ impl AppState {
     ) -> FrameRecord {
         // The scheduler drives `self` as its frame work; run a copy and put it back.
         let mut scheduler = self.scheduler.clone();
-        let (record, render_error, rendered) = {
+        let (record, rendered) = {
             let mut frame = AppFrame {
                 state: self,
                 renderer,
                 clock,
-                render_error: None,
-                rendered: false,
+                rendered: None,
             };
             let r = scheduler.run_frame(clock, &mut frame);
-            (r, frame.render_error.take(), frame.rendered)
+            (r, frame.rendered)
         };
         self.scheduler = scheduler;
-        match render_error {
-            Some(e) => {
+        match rendered {
+            Some(Err(e)) => {
                 if self.render_failure.as_deref() != Some(e.as_str()) {
                     tracing::warn!("render failed: {e}");
                 }
                 self.render_failure = Some(e);
             }
-            None if rendered => self.render_failure = None,
+            Some(Ok(())) => self.render_failure = None,
             None => {}
         }
         let mut record = record;
@@ -696,10 +695,8 @@ pub struct AppFrame<'a> {
     pub renderer: &'a mut dyn FrameRenderer,
     /// The scheduler's clock (also used to time the simulation's phases).
     pub clock: &'a dyn Clock,
-    /// The last render error, if any.
-    pub render_error: Option<String>,
-    /// A render was attempted this frame and succeeded.
-    pub rendered: bool,
+    /// This frame's render: `None` if none was attempted (no eye views yet), else how it went.
+    pub rendered: Option<Result<(), String>>,
 }
 
 impl FrameWork for AppFrame<'_> {
@@ -742,13 +739,10 @@ impl FrameWork for AppFrame<'_> {
         let scene = state.scene(read.wand.map(|w| w.pose));
         state.last_scene_wall = self.clock.now().saturating_sub(scene_start);
         let frame_index = state.scheduler_frames_hint();
-        match self
-            .renderer
-            .render(&scene, &views, &state.output, frame_index)
-        {
-            Ok(()) => self.rendered = true,
-            Err(e) => self.render_error = Some(e),
-        }
+        self.rendered = Some(
+            self.renderer
+                .render(&scene, &views, &state.output, frame_index),
+        );
     }
 }
 

@@ -203,6 +203,25 @@ fn a_character_whose_forces_explode_stalls_and_says_so() {
     assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{r:?}");
 }
 
+/// Slider extremes that make the torso run for a while on 10 ms Euler steps and then blow up
+/// at every step size.
+const EXPLODING_TORSO: &[ParameterChange] = &[
+    ParameterChange::Mass(Selection::All, 1e-4),
+    ParameterChange::TissueStiffness(Selection::All, 500.0),
+];
+
+/// Switches `m` to explicit Euler with a 10 ms fixed step and applies `changes`.
+fn euler_with(m: &mut SurfaceModel, changes: &[ParameterChange]) {
+    m.apply(&ParameterChange::Integrator(IntegratorKind::Euler))
+        .expect("accepted");
+    let mut t = m.tolerances();
+    t.fixed_step_s = 0.01;
+    m.apply(&ParameterChange::Tolerances(t)).expect("accepted");
+    for change in changes {
+        m.apply(change).expect("in range");
+    }
+}
+
 /// A model that runs for a while and then blows up at every step size stalls at its last
 /// accepted state: the steps it took in the call are kept (not undone back to the call's
 /// start), the report's time is where it stopped, and the next call stalls there at once
@@ -212,15 +231,7 @@ fn a_stall_keeps_the_steps_accepted_before_it() {
     let (mut m, motion) = model_and_motion("torso", 16);
     let mut poses = MotionPoses(&motion);
     m.advance(0.2, &mut poses, &mut Unlimited, None);
-    m.apply(&ParameterChange::Integrator(IntegratorKind::Euler))
-        .expect("accepted");
-    let mut t = m.tolerances();
-    t.fixed_step_s = 0.01;
-    m.apply(&ParameterChange::Tolerances(t)).expect("accepted");
-    m.apply(&ParameterChange::Mass(Selection::All, 1e-4))
-        .expect("in range");
-    m.apply(&ParameterChange::TissueStiffness(Selection::All, 500.0))
-        .expect("in range");
+    euler_with(&mut m, EXPLODING_TORSO);
     let r = m.advance(0.5, &mut poses, &mut Unlimited, None);
     assert_eq!(r.end, AdvanceEnd::Stalled, "{r:?}");
     assert!(r.steps > 10, "it ran before it stalled: {r:?}");
@@ -276,27 +287,14 @@ fn guard_rejects_exploding_steps() {
             "penguin",
             &[ParameterChange::Stretch(Selection::All, [1e9, 1e9, 1e9])],
         ),
-        (
-            "torso",
-            &[
-                ParameterChange::Mass(Selection::All, 1e-4),
-                ParameterChange::TissueStiffness(Selection::All, 500.0),
-            ],
-        ),
+        ("torso", EXPLODING_TORSO),
     ];
     for (name, changes) in cases {
         let (mut m, motion) = model_and_motion(name, 16);
         let mut poses = MotionPoses(&motion);
         m.advance(0.2, &mut poses, &mut Unlimited, None);
         let sane = m.snapshot();
-        m.apply(&ParameterChange::Integrator(IntegratorKind::Euler))
-            .expect("accepted");
-        let mut t = m.tolerances();
-        t.fixed_step_s = 0.01;
-        m.apply(&ParameterChange::Tolerances(t)).expect("accepted");
-        for change in changes {
-            m.apply(change).expect("in range");
-        }
+        euler_with(&mut m, changes);
         let r = m.advance(0.5, &mut poses, &mut MaxAttempts(200), None);
         assert!(r.nonfinite_events > 0, "{name}: {r:?}");
         assert!(all_finite(&m), "{name}: {r:?}");
