@@ -45,10 +45,12 @@ fn simulate_prints_the_documented_json() {
         "rechecked_points_per_phase",
         "unsettled_phases",
         "recheck_fraction",
+        "held_points_per_step",
         "point_steps_per_second",
     ] {
         assert!(v[key].is_number(), "{key} missing in {v}");
     }
+    assert_eq!(v["hold_contacts"], true, "the default");
     assert!((v["sim_seconds"].as_f64().expect("number") - 0.3).abs() < 1e-6);
     assert_eq!(v["skin_points"], 256);
     assert!(v["steps"].as_u64().expect("number") > 10);
@@ -291,4 +293,39 @@ fn simulate_a_character_whose_forces_explode_reports_the_stall_and_fails() {
     // A run that reaches its end reports no stall.
     let v = simulate_json(&["penguin_16", "--seconds", "0.1"]);
     assert!(v["stalled_at_s"].is_null(), "{v}");
+}
+
+/// `--hold-contacts false` is the paper's projection alone: the report says so, nothing is
+/// held, and the resting skin is pushed out far more often than when its muscles hold it.
+#[test]
+fn simulate_hold_contacts_switches_the_resting_contact() {
+    let args = ["torso_16", "--seconds", "0.5", "--motion", "none"];
+    let held = simulate_json(&args);
+    let mut off = args.to_vec();
+    off.extend(["--hold-contacts", "false"]);
+    let projected = simulate_json(&off);
+    assert_eq!(held["hold_contacts"], true);
+    assert_eq!(projected["hold_contacts"], false);
+    let per_step = |v: &serde_json::Value, key: &str| v[key].as_f64().expect("number");
+    assert_eq!(per_step(&projected, "held_points_per_step"), 0.0);
+    assert!(per_step(&held, "held_points_per_step") > 50.0, "{held}");
+    assert!(
+        per_step(&held, "pushed_points_per_step")
+            < 0.5 * per_step(&projected, "pushed_points_per_step"),
+        "held {held}\nprojected {projected}"
+    );
+    let out = leman()
+        .args([
+            "simulate",
+            "torso_16",
+            "--seconds",
+            "0.1",
+            "--hold-contacts",
+            "maybe",
+        ])
+        .output()
+        .expect("runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--hold-contacts"), "{err}");
 }

@@ -215,6 +215,38 @@ fn the_recheck_slider_changes_the_running_simulation_threshold() {
 }
 
 #[test]
+fn the_hold_checkbox_switches_resting_contact_in_the_running_simulation() {
+    let (state, clock) = state();
+    let mut h = harness(state);
+    h.run();
+    assert!(h.state().hold_contacts, "the character file's default");
+    h.get_by_label("muscles hold resting skin").click();
+    h.run();
+    assert!(!h.state().hold_contacts);
+    assert!(
+        h.state()
+            .pending_changes
+            .contains(&ParameterChange::HoldContacts(false)),
+        "{:?}",
+        h.state().pending_changes
+    );
+    let mut renderer = CountingRenderer(0);
+    for n in 0..3u32 {
+        clock.set(Duration::from_millis(17) * n);
+        h.state_mut().run_frame(&clock, &mut renderer);
+    }
+    assert!(h.state().pending_changes.is_empty());
+    assert!(h.state().sim_error.is_none(), "{:?}", h.state().sim_error);
+    assert_eq!(
+        h.state().table1.totals.held_points,
+        0,
+        "nothing held once switched off"
+    );
+    h.run();
+    assert!(h.query_by_label("Points held on muscles / step").is_some());
+}
+
+#[test]
 fn a_stalled_simulation_says_so_in_the_panel_and_a_running_one_does_not() {
     let stalled = |moved_m: f32| {
         let (state, clock) = state_with(|c| {

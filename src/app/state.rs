@@ -201,6 +201,8 @@ pub struct AppState {
     pub epsilon_c_m: f32,
     /// Re-check threshold in use, as a fraction of ε_c.
     pub recheck_fraction: f32,
+    /// Whether muscles hold the skin resting on them between steps.
+    pub hold_contacts: bool,
     /// Index of the motion played (none: the neutral posture).
     pub motion: Option<usize>,
     /// Character parameters as last applied.
@@ -305,6 +307,7 @@ impl AppState {
             tolerances,
             epsilon_c_m: d.epsilon_c_m,
             recheck_fraction: d.recheck_fraction,
+            hold_contacts: d.hold_contacts,
             motion,
             params,
             // What the panel shows is what the model uses.

@@ -606,6 +606,23 @@ mod tests {
         }
     }
 
+    /// Holding resting skin is optional (files written before it existed load with it on),
+    /// written on save, and must be a boolean.
+    #[test]
+    fn hold_contacts_is_optional_and_checked() {
+        let text = arm_text();
+        assert!(text.contains("hold_contacts = true\n"), "saved: {text}");
+        let here = Path::new("hold.toml");
+        let old = text.replace("hold_contacts = true\n", "");
+        let c = Character::from_toml_str(&old, here).expect("an older file loads");
+        assert!(c.simulation.hold_contacts);
+        let off = text.replace("hold_contacts = true", "hold_contacts = false");
+        let c = Character::from_toml_str(&off, here).expect("false is fine");
+        assert!(!c.simulation.hold_contacts);
+        let m = load_error(&text.replace("hold_contacts = true", "hold_contacts = 1"));
+        assert!(m.contains("hold_contacts"), "{m}");
+    }
+
     #[test]
     fn bad_spring_reference_is_named() {
         let text = arm_text();

@@ -54,6 +54,13 @@ pub struct SimulationDefaults {
     /// [`DEFAULT_RECHECK_FRACTION`]).
     #[serde(default = "default_recheck_fraction")]
     pub recheck_fraction: f32,
+    /// Whether a muscle holds the skin resting on it between steps: a point the constraints
+    /// pushed out loses the part of its acceleration that presses it into the muscle while it
+    /// stays in contact (a one-sided contact reaction), so resting skin is not pushed out
+    /// again every step. Off, contact is the paper's projection alone (section 4.2.3).
+    /// Optional in files (default true; `docs/simulate.md`, "Resting contact").
+    #[serde(default = "default_hold_contacts")]
+    pub hold_contacts: bool,
     /// ε_r: position error tolerance of the adaptive step control (eq. 11-12).
     pub epsilon_r: f32,
     /// r_threshold: position magnitude above which error control becomes relative, metres.
@@ -78,6 +85,10 @@ fn default_recheck_fraction() -> f32 {
     DEFAULT_RECHECK_FRACTION
 }
 
+fn default_hold_contacts() -> bool {
+    true
+}
+
 /// Whether `f` can be a [`SimulationDefaults::recheck_fraction`]: in (0, 1] (NaN is not). The
 /// one rule the file, the simulator's parameter change and the command line all check.
 pub fn is_recheck_fraction(f: f32) -> bool {
@@ -92,6 +103,7 @@ impl Default for SimulationDefaults {
             k_perpendicular: 1.0,
             epsilon_c_m: 0.005,
             recheck_fraction: DEFAULT_RECHECK_FRACTION,
+            hold_contacts: true,
             epsilon_r: 1e-3,
             r_threshold_m: 1.0,
             epsilon_v: 1e-3,

@@ -49,6 +49,11 @@ pub struct Args {
     /// `recheck_fraction`): larger is faster and leaves fat points deeper.
     #[arg(long)]
     pub recheck_fraction: Option<f32>,
+    /// Whether muscles hold the skin resting on them between steps, `true` or `false`
+    /// (default: the character's `hold_contacts`, true unless the file says otherwise);
+    /// `false` is the paper's projection alone.
+    #[arg(long, value_name = "BOOL", action = clap::ArgAction::Set)]
+    pub hold_contacts: Option<bool>,
     /// After every 1/30 s slice, find the deepest fat point inside any muscle (brute force, not
     /// timed) and report their median, 90th percentile and largest. The checks run between
     /// the timed slices but evict the simulation's data from the caches, so wall times with
@@ -113,8 +118,12 @@ struct Report {
     sampled_depth_m: Option<DepthSummary>,
     /// Mean skin points the constraint phase pushed out per accepted step.
     pushed_points_per_step: f64,
+    /// Mean skin points their muscles held per accepted step.
+    held_points_per_step: f64,
     /// Re-check threshold used, as a fraction of ε_c.
     recheck_fraction: f32,
+    /// Whether muscles held the skin resting on them.
+    hold_contacts: bool,
     /// Constraint phases run (accepted steps and constraint rejections).
     constraint_phases: u64,
     /// Mean re-check passes per constraint phase.
@@ -201,6 +210,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("--recheck-fraction {f}: must be in (0, 1]");
         }
         character.simulation.recheck_fraction = f;
+    }
+    if let Some(on) = args.hold_contacts {
+        character.simulation.hold_contacts = on;
     }
     let motion = match &args.motion {
         Some(name) if name == "none" && character.motion(name).is_none() => None,
@@ -304,7 +316,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         final_max_depth_m: model.max_depth_m(),
         sampled_depth_m: args.sample_depth.then(|| depth_summary(&run.depths_m)),
         pushed_points_per_step: total.pushed_per_step().unwrap_or(0.0),
+        held_points_per_step: total.held_per_step().unwrap_or(0.0),
         recheck_fraction: character.simulation.recheck_fraction,
+        hold_contacts: character.simulation.hold_contacts,
         constraint_phases: total.constraint_phases,
         recheck_passes_per_phase: rechecks.0,
         rechecked_points_per_phase: rechecks.1,
@@ -534,6 +548,19 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         "{:<28}{:.0} of {} per step",
         "Points pushed out", r.pushed_points_per_step, r.skin_points
     )?;
+    if r.hold_contacts {
+        writeln!(
+            out,
+            "{:<28}{:.0} of {} per step",
+            "Points held on muscles", r.held_points_per_step, r.skin_points
+        )?;
+    } else {
+        writeln!(
+            out,
+            "{:<28}off (projection alone)",
+            "Points held on muscles"
+        )?;
+    }
     writeln!(
         out,
         "{:<28}{:.2} passes, {:.0} points per constraint phase ({} phases, {} unsettled; above {} ε_c)",

@@ -183,6 +183,10 @@ pub struct AdvanceReport {
     /// (a point counts once per step however many passes moved it). Divided by `steps`, the
     /// points in contact per step: what the constraint phase's cost grows with.
     pub pushed_points: u64,
+    /// Skin points resting on a muscle that holds them for the next step (see
+    /// [`crate::character::SimulationDefaults::hold_contacts`]), summed over the accepted steps;
+    /// zero with holding off or in models without contacts.
+    pub held_points: u64,
     /// Non-finite states or energy explosions caught (the step was rejected and, if the state
     /// itself was bad, the last good state restored).
     pub nonfinite_events: u64,
@@ -219,6 +223,7 @@ impl Default for AdvanceReport {
             velocity_evals: 0,
             max_penetration_m: 0.0,
             pushed_points: 0,
+            held_points: 0,
             nonfinite_events: 0,
             constraint_phases: 0,
             recheck_passes: 0,
@@ -238,6 +243,11 @@ impl AdvanceReport {
     /// Mean skin points pushed out per accepted step (`None` before the first step).
     pub fn pushed_per_step(&self) -> Option<f64> {
         (self.steps > 0).then(|| self.pushed_points as f64 / self.steps as f64)
+    }
+
+    /// Mean skin points held on their muscles per accepted step (`None` before the first step).
+    pub fn held_per_step(&self) -> Option<f64> {
+        (self.steps > 0).then(|| self.held_points as f64 / self.steps as f64)
     }
 
     /// Mean re-check passes and re-checked points per constraint phase (`None` before the
@@ -267,6 +277,7 @@ impl AdvanceReport {
         self.velocity_evals += later.velocity_evals;
         self.max_penetration_m = self.max_penetration_m.max(later.max_penetration_m);
         self.pushed_points += later.pushed_points;
+        self.held_points += later.held_points;
         self.nonfinite_events += later.nonfinite_events;
         self.constraint_phases += later.constraint_phases;
         self.recheck_passes += later.recheck_passes;
@@ -334,6 +345,9 @@ pub enum ParameterChange {
     /// Re-check threshold of the constraint phase as a fraction of ε_c, in (0, 1] (see
     /// [`crate::character::SimulationDefaults::recheck_fraction`]).
     RecheckFraction(f32),
+    /// Whether muscles hold the skin resting on them between steps (see
+    /// [`crate::character::SimulationDefaults::hold_contacts`]).
+    HoldContacts(bool),
     /// Switches the integrator.
     Integrator(IntegratorKind),
     /// Replaces the step-size control parameters.

@@ -228,6 +228,19 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         state.recheck_fraction = recheck;
         state.queue_change(ParameterChange::RecheckFraction(recheck));
     }
+    let mut hold = state.hold_contacts;
+    if ui
+        .checkbox(&mut hold, "muscles hold resting skin")
+        .on_hover_text(
+            "A point pushed out of a muscle keeps resting on it (the muscle bears what presses \
+             it in) instead of sinking in and being pushed out again every step. Off is the \
+             paper's projection alone: slower, with the same constraints.",
+        )
+        .changed()
+    {
+        state.hold_contacts = hold;
+        state.queue_change(ParameterChange::HoldContacts(hold));
+    }
 
     ui.separator();
     let mut ratio = state.scheduler.config().sim_per_real;
@@ -306,6 +319,13 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         ui.label(
             t1.totals
                 .pushed_per_step()
+                .map_or("–".into(), |p| format!("{p:.0}")),
+        );
+        ui.end_row();
+        ui.label("Points held on muscles / step");
+        ui.label(
+            t1.totals
+                .held_per_step()
                 .map_or("–".into(), |p| format!("{p:.0}")),
         );
         ui.end_row();

@@ -142,15 +142,21 @@ impl Broadphase {
         self.valid = false;
     }
 
-    /// The free points the last [`enforce`] call moved, each with the world unit direction
-    /// the last shape pushed it in (the muscle's outward normal there).
-    pub fn last_moves(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
-        let sc = &self.scratch;
-        sc.points.moved.iter().map(|&f| {
-            let f = f as usize;
-            let n = &sc.points.last_normal;
-            (f, Vec3::new(n[0][f], n[1][f], n[2][f]))
-        })
+    /// Sets `mask[f] = 1` for every free point the last [`enforce`] call moved.
+    pub fn mark_moved(&self, mask: &mut [u8]) {
+        for &f in &self.scratch.points.moved {
+            if let Some(m) = mask.get_mut(f as usize) {
+                *m = 1;
+            }
+        }
+    }
+
+    /// Per free point, the shape that moved it last in the passes since the last rebuild and
+    /// the world direction of that push, and the fat points as the last pass left them (world,
+    /// SoA): valid for the points a pass of the current phase moved ([`Self::mark_moved`]).
+    pub fn last_pushes(&self) -> (&[u32], &[Vec<f32>; 3], &[Vec<f32>; 3]) {
+        let p = &self.scratch.points;
+        (&p.last_shape, &p.last_normal, &p.q)
     }
 }
 

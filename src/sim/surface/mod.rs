@@ -21,6 +21,7 @@
 
 mod anchors;
 pub mod constraints;
+mod contacts;
 mod fastmath;
 pub mod forces;
 pub(crate) mod kernels;
@@ -43,6 +44,7 @@ use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
 use crate::clock::Clock;
 use anchors::AnchorTable;
 use constraints::{Broadphase, ConstraintInput};
+use contacts::{ContactState, PhaseEnd, ShapeTable};
 use forces::{ForceInput, ForceScratch, Materials, Springs, StepKinematics};
 
 /// Name of this model kind in snapshots and reports.
@@ -76,11 +78,15 @@ struct Core {
     epsilon_c_m: f32,
     /// Corrections longer than this fraction of ε_c send their neighbourhoods to the re-checks.
     recheck_fraction: f32,
-    /// The points the constraint phase moved in the last committed step: the next step's
-    /// error estimate leaves their inward error to the constraints
-    /// ([`SecondOrderSystem::absorbed_error`]). Part of the state, so a snapshot or checkpoint
-    /// continues exactly as the run it was taken from.
-    contacts: Vec<Contact>,
+    /// The points the constraint phase pushed in the last committed step and the ones it
+    /// pushed before that a muscle still holds ([`contacts`]): the next step's error estimate
+    /// leaves their inward error to the constraints ([`SecondOrderSystem::absorbed_error`]),
+    /// and the holding ones lose the acceleration into their muscle. Part of the state, so a
+    /// snapshot or checkpoint continues exactly as the run it was taken from.
+    contacts: ContactState,
+    /// Whether muscles hold the skin resting on them between steps ([`ContactState::hold`]);
+    /// off, contact is the paper's positional projection alone.
+    hold_contacts: bool,
 }
 
 /// Scratch and caches (not part of a snapshot).
@@ -111,22 +117,16 @@ struct Work {
     flags: Vec<u8>,
     /// `(t, h, correction)` of the last constraint rejection (for root bracketing).
     last_constraint_reject: Option<(f64, f64, f32)>,
-    /// Points the constraint phase moved in the current candidate (all its passes), with the
-    /// direction it pushed each; promoted to `contacts` only when the candidate is committed.
-    candidate_contacts: Vec<Contact>,
+    /// The contacts after the current candidate's constraint phase; promoted to
+    /// `Core::contacts` only when the candidate is committed.
+    candidate_contacts: ContactState,
     /// Per free point, 1 if it is among `candidate_contacts` (the points the constraint phase
     /// moved in the current candidate), else 0.
     contact_mask: Vec<u8>,
     /// `Core::contacts` at the checkpoint.
-    checkpoint_contacts: Vec<Contact>,
-}
-
-/// A free point the constraint phase moved, and the world unit direction it was pushed in
-/// (the muscle's outward normal there).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Contact {
-    point: u32,
-    normal: Vec3,
+    checkpoint_contacts: ContactState,
+    /// Scratch of [`ContactState::update`].
+    shape_table: ShapeTable,
 }
 
 /// The elastic surface layer model of one character.
@@ -141,7 +141,7 @@ struct Eval<'a> {
     input: ForceInput<'a>,
     scratch: &'a mut ForceScratch,
     /// Contacts of the last committed step (see [`SecondOrderSystem::absorbed_error`]).
-    contacts: &'a [Contact],
+    contacts: &'a ContactState,
     clock: Option<&'a dyn Clock>,
     force_time: Duration,
 }
@@ -164,6 +164,7 @@ impl SecondOrderSystem for Eval<'_> {
     fn position_accel(&mut self, t_s: f64, x: &[f32], a: &mut [f32]) {
         let start = self.now();
         forces::position_accel(&self.input, self.scratch, t_s, x, a);
+        self.contacts.hold(a);
         self.add_time(start);
     }
     fn add_velocity_accel(&mut self, _t_s: f64, _x: &[f32], v: &[f32], a: &mut [f32]) {
@@ -187,28 +188,7 @@ impl SecondOrderSystem for Eval<'_> {
     /// contact normal when it points into the muscle: the step went further in than Euler's,
     /// and the constraint phase replaces that motion (checked against ε_c, section 4.2.3).
     fn absorbed_error(&self, _x: &[f32], error: &mut [f32]) {
-        drop_inward_error(self.contacts, error);
-    }
-}
-
-/// Removes `max(e·n, 0) n` from each contact point's error `e` (SoA `[x…, y…, z…]` over the
-/// free points). A point listed more than once (moved by several passes or shapes) loses the
-/// inward part along each of its directions.
-fn drop_inward_error(contacts: &[Contact], error: &mut [f32]) {
-    let free = error.len() / 3;
-    for c in contacts {
-        let f = c.point as usize;
-        if f >= free {
-            continue;
-        }
-        let e = Vec3::new(error[f], error[free + f], error[2 * free + f]);
-        let inward = e.dot(c.normal);
-        if inward > 0.0 {
-            let kept = e - inward * c.normal;
-            error[f] = kept.x;
-            error[free + f] = kept.y;
-            error[2 * free + f] = kept.z;
-        }
+        self.contacts.drop_inward_error(error);
     }
 }
 
@@ -449,7 +429,7 @@ impl SurfaceModel {
             self.core.x = rest;
             self.core.v.iter_mut().for_each(|v| *v = 0.0);
             self.core.step_s = self.core.tolerances.min_step_s;
-            self.core.contacts.clear();
+            self.core.contacts.clear(self.core.free());
         }
         self.work.last_constraint_reject = None;
         self.work.start_valid = false;
@@ -716,7 +696,8 @@ impl Core {
             k_perpendicular: d.k_perpendicular,
             epsilon_c_m: d.epsilon_c_m,
             recheck_fraction: d.recheck_fraction,
-            contacts: Vec::new(),
+            contacts: ContactState::default(),
+            hold_contacts: d.hold_contacts,
             character,
         })
     }
@@ -886,6 +867,7 @@ impl DeformationModel for SurfaceModel {
                     report.max_step_s = report.max_step_s.max(h);
                     report.max_penetration_m = report.max_penetration_m.max(correction_m);
                     report.pushed_points += u64::from(pushed);
+                    report.held_points += self.core.contacts.held_points() as u64;
                     // A step shortened to land on the target does not shrink the next one.
                     self.core.step_s = if h < planned {
                         planned.max(next_s)
@@ -1095,6 +1077,14 @@ impl DeformationModel for SurfaceModel {
                 }
                 core.recheck_fraction = *f;
             }
+            ParameterChange::HoldContacts(on) => {
+                core.hold_contacts = *on;
+                // Takes effect from the next step: the holds of the current state go (or are
+                // made by the next pushes).
+                if !on {
+                    core.contacts.release_all();
+                }
+            }
             ParameterChange::Integrator(kind) => {
                 core.kind = *kind;
                 core.step_s = initial_step(*kind, &core.tolerances);
@@ -1180,7 +1170,8 @@ impl DeformationModel for SurfaceModel {
         };
         self.core = resample::resample(&self.core, around as usize, along as usize, current_rings);
         // The contacts name points of the old grid.
-        self.core.contacts.clear();
+        let free = self.core.free();
+        self.core.contacts.clear(free);
         self.work.start_valid = false;
         self.work.broad.invalidate();
         self.work.checkpoint_x.clear();
@@ -1295,8 +1286,9 @@ fn constrain_candidate(
         None,
         &mut w.touched,
     );
-    w.candidate_contacts.clear();
-    record_contacts(&w.broad, &mut w.candidate_contacts);
+    w.contact_mask.clear();
+    w.contact_mask.resize(free, 0);
+    w.broad.mark_moved(&mut w.contact_mask);
     let (mut passes, mut rechecked_points) = (0, 0);
     // Corrections no longer than the re-check threshold do not warrant another pass.
     let mut last_corrected = if outcome.max_correction_m > input.recheck_m {
@@ -1332,7 +1324,7 @@ fn constrain_candidate(
             Some(&w.recheck),
             &mut w.touched,
         );
-        record_contacts(&w.broad, &mut w.candidate_contacts);
+        w.broad.mark_moved(&mut w.contact_mask);
         last_corrected = if second.max_correction_m > input.recheck_m {
             second.corrected
         } else {
@@ -1344,13 +1336,19 @@ fn constrain_candidate(
             outcome.worst = second.worst;
         }
     }
-    w.contact_mask.clear();
-    w.contact_mask.resize(free, 0);
-    for c in &w.candidate_contacts {
-        if let Some(b) = w.contact_mask.get_mut(c.point as usize) {
-            *b = 1;
-        }
-    }
+    let (last_shape, last_normal, fat_points) = w.broad.last_pushes();
+    w.candidate_contacts.update(
+        &core.contacts,
+        &PhaseEnd {
+            pushed: &w.contact_mask,
+            last_shape,
+            last_normal,
+            fat_points,
+            shapes: shapes_end,
+        },
+        core.hold_contacts,
+        &mut w.shape_table,
+    );
     absorb_cancelled_velocity(
         free,
         h_s,
@@ -1472,12 +1470,4 @@ fn fat_stride(core: &Core) -> (usize, usize) {
 /// The normals that offset the fat points of `grid` (the full grid of `core`'s skin).
 fn fat_normals(core: &Core, grid: &[Vec<f32>; 3], out: &mut [Vec<f32>; 3]) {
     forces::grid_normals_strided(core.around, core.along, fat_stride(core), grid, out);
-}
-
-/// Appends the points the last constraint pass moved, with their push directions.
-fn record_contacts(broad: &Broadphase, out: &mut Vec<Contact>) {
-    out.extend(broad.last_moves().map(|(f, normal)| Contact {
-        point: f as u32,
-        normal,
-    }));
 }
