@@ -127,6 +127,10 @@ struct Work {
     checkpoint_contacts: ContactState,
     /// Scratch of [`ContactState::update`].
     shape_table: ShapeTable,
+    /// Per free point, 1 where the current candidate's full pass pushed it, with the direction
+    /// (world, SoA; see [`PhaseEnd::first_normal`]).
+    first_mask: Vec<u8>,
+    first_normal: [Vec<f32>; 3],
 }
 
 /// The elastic surface layer model of one character.
@@ -1289,6 +1293,19 @@ fn constrain_candidate(
     w.contact_mask.clear();
     w.contact_mask.resize(free, 0);
     w.broad.mark_moved(&mut w.contact_mask);
+    if !core.hold_contacts {
+        // The projection alone also leaves the full pass's push direction to the error
+        // estimate (see `ContactState::update`).
+        w.first_mask.clone_from(&w.contact_mask);
+        for (first, last) in w.first_normal.iter_mut().zip(w.broad.last_pushes().1) {
+            first.clone_from(last);
+        }
+    } else {
+        w.first_mask.resize(free, 0);
+        for c in &mut w.first_normal {
+            c.resize(free, 0.0);
+        }
+    }
     let (mut passes, mut rechecked_points) = (0, 0);
     // Corrections no longer than the re-check threshold do not warrant another pass.
     let mut last_corrected = if outcome.max_correction_m > input.recheck_m {
@@ -1345,6 +1362,8 @@ fn constrain_candidate(
             last_normal,
             fat_points,
             shapes: shapes_end,
+            first_pushed: &w.first_mask,
+            first_normal: &w.first_normal,
         },
         core.hold_contacts,
         &mut w.shape_table,
