@@ -88,6 +88,10 @@ struct PointMoves {
     /// Velocity of the last moving shape's surface where it left each point (world, m/s,
     /// SoA): eq. 13's reference, taken when the move is recorded.
     surface_vel: [Vec<f32>; 3],
+    /// Where the last move left each point's fat point and the direction it moved it, in the
+    /// moving shape's own frame (the contact a hold keeps, [`super::contacts`]).
+    push_surface: [Vec<f32>; 3],
+    push_normal: [Vec<f32>; 3],
     /// Points moved this pass, each once.
     moved: Vec<u32>,
 }
@@ -151,13 +155,34 @@ impl Broadphase {
         }
     }
 
-    /// Per free point, the shape that moved it last in the passes since the last rebuild and
-    /// the world direction of that push, and the fat points as the last pass left them (world,
-    /// SoA): valid for the points a pass of the current phase moved ([`Self::mark_moved`]).
-    pub fn last_pushes(&self) -> (&[u32], &[Vec<f32>; 3], &[Vec<f32>; 3]) {
+    /// Per free point, the last push the passes recorded (valid for the points a pass of the
+    /// current phase moved, [`Self::mark_moved`]) and the fat points as the last pass left them.
+    pub fn pushes(&self) -> Pushes<'_> {
         let p = &self.scratch.points;
-        (&p.last_shape, &p.last_normal, &p.q)
+        Pushes {
+            shape: &p.last_shape,
+            normal: &p.last_normal,
+            surface_shape: &p.push_surface,
+            normal_shape: &p.push_normal,
+            fat_points: &p.q,
+        }
     }
+}
+
+/// Per free point, the last push the constraint passes recorded, and the fat points (see
+/// [`Broadphase::pushes`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Pushes<'a> {
+    /// Index of the shape that pushed the point last.
+    pub shape: &'a [u32],
+    /// The direction it pushed it in (its outward unit normal there), world (SoA).
+    pub normal: &'a [Vec<f32>; 3],
+    /// Where the push left the fat point, in that shape's frame, metres (SoA).
+    pub surface_shape: &'a [Vec<f32>; 3],
+    /// The push direction in that shape's frame (SoA).
+    pub normal_shape: &'a [Vec<f32>; 3],
+    /// The fat points as the last pass left them, world, metres (SoA).
+    pub fat_points: &'a [Vec<f32>; 3],
 }
 
 /// What a constraint pass found.
@@ -257,6 +282,8 @@ impl Broadphase {
             .last_normal
             .iter_mut()
             .chain(&mut sc.points.surface_vel)
+            .chain(&mut sc.points.push_surface)
+            .chain(&mut sc.points.push_normal)
         {
             c.resize(free, 0.0);
         }
@@ -772,6 +799,8 @@ struct MoveLog<'a> {
     q: [&'a mut [f32]; 3],
     surface_vel: [&'a mut [f32]; 3],
     last_normal: [&'a mut [f32]; 3],
+    push_surface: [&'a mut [f32]; 3],
+    push_normal: [&'a mut [f32]; 3],
     moved_round: &'a mut [u8],
     last_shape: &'a mut [u32],
     moved: &'a mut Vec<u32>,
@@ -786,34 +815,50 @@ impl<'a> MoveLog<'a> {
             last_shape,
             last_normal,
             surface_vel,
+            push_surface,
+            push_normal,
             moved,
         } = points;
-        let lens = q.iter().chain(surface_vel.iter()).chain(last_normal.iter());
+        let lens = (q.iter().chain(surface_vel.iter()).chain(last_normal.iter()))
+            .chain(push_surface.iter().chain(push_normal.iter()));
         let n = lens
             .map(Vec::len)
             .fold(moved_round.len().min(last_shape.len()), usize::min);
-        let [qx, qy, qz] = q;
-        let [sx, sy, sz] = surface_vel;
-        let [nx, ny, nz] = last_normal;
+        let cut = |[x, y, z]: &'a mut [Vec<f32>; 3]| [&mut x[..n], &mut y[..n], &mut z[..n]];
         MoveLog {
-            q: [&mut qx[..n], &mut qy[..n], &mut qz[..n]],
-            surface_vel: [&mut sx[..n], &mut sy[..n], &mut sz[..n]],
-            last_normal: [&mut nx[..n], &mut ny[..n], &mut nz[..n]],
+            q: cut(q),
+            surface_vel: cut(surface_vel),
+            last_normal: cut(last_normal),
+            push_surface: cut(push_surface),
+            push_normal: cut(push_normal),
             moved_round: &mut moved_round[..n],
             last_shape: &mut last_shape[..n],
             moved,
         }
     }
 
-    /// Records that `f`'s fat point was moved to `q` (world, along the unit `normal`) by
-    /// `by`'s shape in its round, where that shape's surface moves at `surface` (m/s; eq. 13's
-    /// reference, [`SurfaceMotion::velocity_at`]).
+    /// Records that `f`'s fat point was moved to `q` (world, along the unit `normal`; `local`
+    /// and `local_normal` are the same in the moving shape's frame) by `by`'s shape in its
+    /// round, where that shape's surface moves at `surface` (m/s; eq. 13's reference,
+    /// [`SurfaceMotion::velocity_at`]).
     #[inline(always)]
-    fn record(&mut self, f: usize, q: Vec3, surface: Vec3, normal: Vec3, by: Owed) {
+    #[allow(clippy::too_many_arguments)] // the move, in both frames
+    fn record(
+        &mut self,
+        f: usize,
+        q: Vec3,
+        surface: Vec3,
+        normal: Vec3,
+        local: Vec3,
+        local_normal: Vec3,
+        by: Owed,
+    ) {
         for c in 0..3 {
             self.q[c][f] = q[c];
             self.surface_vel[c][f] = surface[c];
             self.last_normal[c][f] = normal[c];
+            self.push_surface[c][f] = local[c];
+            self.push_normal[c][f] = local_normal[c];
         }
         if self.moved_round[f] == u8::MAX {
             self.moved.push(f as u32);
@@ -859,7 +904,12 @@ fn sphere_stage(
                 continue;
             }
             let moved_to = q + delta;
-            log.record(f, moved_to, motion.velocity_at(moved_to), dir, owed);
+            let (local, local_normal) = (
+                s.shape_from_world.transform_point3(moved_to),
+                s.shape_from_world.transform_vector3(dir),
+            );
+            let velocity = motion.velocity_at(moved_to);
+            log.record(f, moved_to, velocity, dir, local, local_normal, owed);
             moved += 1;
         }
         sc.hit_index = found;
@@ -947,7 +997,9 @@ fn general_stage(
         } else {
             outward(geometry, s, project.position(i))
         };
-        log.record(point[i] as usize, at(&qs), at(&surfaces), normal, owed);
+        let local_normal = s.shape_from_world.transform_vector3(normal);
+        let (f, local) = (point[i] as usize, project.position(i));
+        log.record(f, at(&qs), at(&surfaces), normal, local, local_normal, owed);
         moved += 1;
     }
     moved
@@ -1128,7 +1180,7 @@ const SET_BITS: [[u8; 9]; 256] = {
 /// slots are written and the count advances by the number of hits. (A loop over the set bits
 /// mispredicts its exit about once per word: runs are about half hits.) A length that is not
 /// a multiple of 8 ends with a byte-wise tail.
-fn collect_hits(mask: &[u8], out: &mut Vec<u32>) {
+pub(super) fn collect_hits(mask: &[u8], out: &mut Vec<u32>) {
     /// Moves bit `8 i` of a word to bit `56 + i`.
     const GATHER: u64 = 0x0102_0408_1020_4080;
     out.clear();

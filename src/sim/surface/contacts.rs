@@ -31,10 +31,16 @@
 //! A released point falls back onto the muscle under the full forces and is pushed again,
 //! which renews its contact.
 //!
-//! Everything is kept per free point in structure-of-arrays form, so the integrator's two uses
-//! ([`hold`], [`drop_inward_error`]) are single vectorised passes and the bookkeeping after a
-//! constraint phase ([`ContactState::update`]) is one loop over the free points.
+//! Everything is kept per free point in structure-of-arrays form. The pushes record their
+//! contact in the pushing shape's frame as they are made (`super::constraints`), so after a
+//! phase ([`ContactState::update`]) only the held points that were not pushed again are looked
+//! at one by one (their fat point mapped into their shape's frame); the rest of the bookkeeping
+//! and the integrator's two uses ([`ContactState::hold`], [`ContactState::drop_inward_error`])
+//! are single vectorised passes over the free points.
 
+use glam::Vec3;
+
+use super::constraints::{Pushes, collect_hits};
 use crate::character::ShapeInstance;
 
 /// Steps a contact holds its point after the push that made it (the push's own step counts
@@ -48,6 +54,18 @@ pub const HOLD_SLIDE_M: f32 = 1.0e-3;
 
 /// `shape` of a point without a contact.
 const NONE: u32 = u32::MAX;
+
+/// Whether a fat point at `local` (in the frame of its contact's shape) still rests where the
+/// push left it: at most [`HOLD_GAP_M`] off the tangent plane through `surface` with the unit
+/// normal `normal` (inside is fine: the constraints push it out) and at most [`HOLD_SLIDE_M`]
+/// along it.
+#[inline(always)]
+fn rests_on_plane(local: Vec3, surface: Vec3, normal: Vec3) -> bool {
+    let d = local - surface;
+    let gap = d.dot(normal);
+    let slide2 = d.length_squared() - gap * gap;
+    (gap <= HOLD_GAP_M) & (slide2 <= HOLD_SLIDE_M * HOLD_SLIDE_M)
+}
 
 /// Per free point: the contact the constraint phase left it in. Part of the model's state, so a
 /// snapshot or checkpoint continues exactly as the run it was taken from.
@@ -82,23 +100,32 @@ pub(super) struct ContactState {
     firsts: usize,
 }
 
-/// What the constraint phase left at one free point, for [`ContactState::update`].
+/// What a constraint phase left at the free points, for [`ContactState::update`].
 pub(super) struct PhaseEnd<'a> {
     /// Per free point, non-zero where any pass of the phase pushed the point.
     pub pushed: &'a [u8],
-    /// Per free point, the shape that pushed it last (valid where `pushed`).
-    pub last_shape: &'a [u32],
-    /// Per free point, the world direction of its last push (valid where `pushed`).
-    pub last_normal: &'a [Vec<f32>; 3],
-    /// The fat points after the phase, world, metres (SoA over the free points).
-    pub fat_points: &'a [Vec<f32>; 3],
+    /// The last push of each point, and the fat points.
+    pub pushes: Pushes<'a>,
     /// The shapes of the phase (at the end of its step).
     pub shapes: &'a [ShapeInstance],
     /// Per free point, non-zero where the phase's full pass pushed the point (read with holding
     /// off only).
     pub first_pushed: &'a [u8],
-    /// The world direction of that push (the later passes overwrite `last_normal`).
+    /// The world direction of that push (the later passes overwrite the last push's).
     pub first_normal: &'a [Vec<f32>; 3],
+}
+
+/// Scratch of [`ContactState::update`].
+#[derive(Debug, Clone, Default)]
+pub(super) struct UpdateScratch {
+    /// Per free point, 1 where a held point was not pushed again (its hold is checked).
+    check: Vec<u8>,
+    /// Those points, in ascending order.
+    checked: Vec<u32>,
+    /// Per free point, 1 where the check kept the hold (valid where `check`).
+    kept: Vec<u8>,
+    /// The checked contacts' world normals (valid where `check`).
+    normal: [Vec<f32>; 3],
 }
 
 impl ContactState {
@@ -110,17 +137,17 @@ impl ContactState {
         self.shape.resize(free, NONE);
         self.age.clear();
         self.age.resize(free, 0);
-        for a in self
-            .surface_shape
-            .iter_mut()
-            .chain(&mut self.normal_shape)
-            .chain(&mut self.hold)
-            .chain(&mut self.absorb)
-            .chain(&mut self.absorb_first)
-        {
+        for a in self.vectors_mut() {
             a.clear();
             a.resize(free, 0.0);
         }
+    }
+
+    /// The per-point vectors' components, each a `Vec` over the free points.
+    fn vectors_mut(&mut self) -> impl Iterator<Item = &mut Vec<f32>> {
+        (self.surface_shape.iter_mut().chain(&mut self.normal_shape))
+            .chain(self.hold.iter_mut().chain(&mut self.absorb))
+            .chain(&mut self.absorb_first)
     }
 
     /// Whether the arrays are sized for `free` points.
@@ -170,23 +197,25 @@ impl ContactState {
     /// contact, held; the others keep a held contact of `old`, one step older, while it passes
     /// the checks of the module docs; the rest have none. With `holding` false nobody is held
     /// and the contacts are this phase's pushes alone (the paper's projection; they still serve
-    /// the error estimate). `table` is scratch.
+    /// the error estimate).
     pub fn update(
         &mut self,
         old: &ContactState,
         end: &PhaseEnd<'_>,
         holding: bool,
-        table: &mut ShapeTable,
+        scratch: &mut UpdateScratch,
     ) {
         let free = end.pushed.len();
-        self.clear(free);
+        let p = &end.pushes;
         let sized = |a: &[Vec<f32>; 3]| a.iter().all(|c| c.len() >= free);
-        let inputs_ok = end.last_shape.len() >= free
-            && sized(end.last_normal)
-            && sized(end.fat_points)
-            && sized(end.first_normal)
+        let inputs_ok = [p.normal, p.surface_shape, p.normal_shape, p.fat_points]
+            .into_iter()
+            .chain([end.first_normal])
+            .all(sized)
+            && p.shape.len() >= free
             && end.first_pushed.len() >= free;
         if !inputs_ok {
+            self.clear(free);
             return;
         }
         let empty;
@@ -198,6 +227,12 @@ impl ContactState {
             empty = e;
             &empty
         };
+        old.check_holds(end, holding, scratch);
+        self.shape.resize(free, NONE);
+        self.age.resize(free, 0);
+        for a in self.vectors_mut() {
+            a.resize(free, 0.0);
+        }
         let Self {
             shape,
             age,
@@ -209,65 +244,107 @@ impl ContactState {
             held,
             firsts,
         } = self;
+        let ([l0, l1, l2], [ps0, ps1, ps2], [pn0, pn1, pn2]) =
+            (p.normal, p.surface_shape, p.normal_shape);
+        let [w0, w1, w2] = &scratch.normal;
         let [fn0, fn1, fn2] = end.first_normal;
-        let [l0, l1, l2] = end.last_normal;
-        let [q0, q1, q2] = end.fat_points;
-        let [oh0, oh1, oh2] = &old.hold;
         let [os0, os1, os2] = &old.surface_shape;
         let [on0, on1, on2] = &old.normal_shape;
-        // The shapes in chunks the table holds (one chunk for any character of up to
-        // `TABLE_SHAPES` shapes).
-        for first in (0..end.shapes.len()).step_by(TABLE_SHAPES) {
-            let chunk = &end.shapes[first..end.shapes.len().min(first + TABLE_SHAPES)];
-            table.fill(chunk);
-            let (holds, first_pushes) = update_pass(
-                end.pushed,
-                end.last_shape,
-                l0,
-                l1,
-                l2,
-                q0,
-                q1,
-                q2,
-                &old.shape,
-                &old.age,
-                oh0,
-                oh1,
-                oh2,
-                os0,
-                os1,
-                os2,
-                on0,
-                on1,
-                on2,
-                holding,
-                &table.columns,
-                first as u32,
-                chunk.len() as u32,
-                shape,
-                age,
-                s0,
-                s1,
-                s2,
-                m0,
-                m1,
-                m2,
-                h0,
-                h1,
-                h2,
-                a0,
-                a1,
-                a2,
-                end.first_pushed,
-                fn0,
-                fn1,
-                fn2,
-                f0,
-                f1,
-                f2,
+        (*held, *firsts) = update_pass(
+            end.pushed,
+            p.shape,
+            l0,
+            l1,
+            l2,
+            ps0,
+            ps1,
+            ps2,
+            pn0,
+            pn1,
+            pn2,
+            &scratch.check,
+            &scratch.kept,
+            w0,
+            w1,
+            w2,
+            end.first_pushed,
+            fn0,
+            fn1,
+            fn2,
+            &old.shape,
+            &old.age,
+            os0,
+            os1,
+            os2,
+            on0,
+            on1,
+            on2,
+            holding,
+            shape,
+            age,
+            s0,
+            s1,
+            s2,
+            m0,
+            m1,
+            m2,
+            h0,
+            h1,
+            h2,
+            a0,
+            a1,
+            a2,
+            f0,
+            f1,
+            f2,
+        );
+    }
+
+    /// The checks of the module docs for every point this state holds that the phase did not
+    /// push again, one by one (each maps its fat point into its own shape's frame): into
+    /// `scratch`, per free point, whether it was checked, whether its hold is kept, and its
+    /// contact's world normal.
+    fn check_holds(&self, end: &PhaseEnd<'_>, holding: bool, scratch: &mut UpdateScratch) {
+        let free = end.pushed.len();
+        let [h0, h1, h2] = &self.hold;
+        let (h0, h1, h2, pushed) = (&h0[..free], &h1[..free], &h2[..free], &end.pushed[..free]);
+        scratch.check.resize(free, 0);
+        mark_checks(h0, h1, h2, pushed, holding, &mut scratch.check);
+        collect_hits(&scratch.check, &mut scratch.checked);
+        scratch.kept.resize(free, 0);
+        for c in &mut scratch.normal {
+            c.resize(free, 0.0);
+        }
+        let [q0, q1, q2] = end.pushes.fat_points;
+        for &f in &scratch.checked {
+            let f = f as usize;
+            let Some(s) = end.shapes.get(self.shape[f] as usize) else {
+                // No such shape any more: released, with no direction to keep.
+                scratch.kept[f] = 0;
+                for c in &mut scratch.normal {
+                    c[f] = 0.0;
+                }
+                continue;
+            };
+            let local = s
+                .shape_from_world
+                .transform_point3(Vec3::new(q0[f], q1[f], q2[f]));
+            let surface = Vec3::new(
+                self.surface_shape[0][f],
+                self.surface_shape[1][f],
+                self.surface_shape[2][f],
             );
-            *held += holds;
-            *firsts += first_pushes;
+            let normal = Vec3::new(
+                self.normal_shape[0][f],
+                self.normal_shape[1][f],
+                self.normal_shape[2][f],
+            );
+            let young = self.age[f].saturating_add(1) < HOLD_STEPS;
+            scratch.kept[f] = u8::from(young & rests_on_plane(local, surface, normal));
+            let world = s.world_from_shape.transform_vector3(normal);
+            for c in 0..3 {
+                scratch.normal[c][f] = world[c];
+            }
         }
     }
 
@@ -304,76 +381,38 @@ impl ContactState {
     }
 }
 
-/// Shapes a [`ShapeTable`] holds at once ([`ContactState::update`] goes over a character with
-/// more shapes in chunks of this many).
-pub const TABLE_SHAPES: usize = 256;
-
-/// Up to [`TABLE_SHAPES`] shapes' `shape_from_world` transforms as twelve fixed-size arrays (the
-/// columns of the rotation, then the translation), so a vectorised loop over points can look
-/// each point's shape up by index (a gather) without bounds checks.
-#[derive(Debug, Clone)]
-pub(super) struct ShapeTable {
-    columns: Box<[[f32; TABLE_SHAPES]; 12]>,
-}
-
-impl Default for ShapeTable {
-    fn default() -> Self {
-        Self {
-            columns: Box::new([[0.0; TABLE_SHAPES]; 12]),
-        }
-    }
-}
-
-impl ShapeTable {
-    /// Entry `k` becomes `shapes[k]` (at most [`TABLE_SHAPES`] are taken).
-    fn fill(&mut self, shapes: &[ShapeInstance]) {
-        for (k, s) in shapes.iter().take(TABLE_SHAPES).enumerate() {
-            let t = &s.shape_from_world;
-            let m = t.matrix3;
-            let values = [
-                m.x_axis.x,
-                m.x_axis.y,
-                m.x_axis.z,
-                m.y_axis.x,
-                m.y_axis.y,
-                m.y_axis.z,
-                m.z_axis.x,
-                m.z_axis.y,
-                m.z_axis.z,
-                t.translation.x,
-                t.translation.y,
-                t.translation.z,
-            ];
-            for (c, v) in self.columns.iter_mut().zip(values) {
-                c[k] = v;
-            }
-        }
-    }
-}
-
 crate::sim::simd::multiversion! {
-    /// [`ContactState::update`] (returning how many points it holds and how many got a
-    /// full-pass direction) for the free points whose shape (the shape of their push in
-    /// this phase if any, else of their old contact) is one of the table's `count` shapes,
-    /// which are the character's shapes `first..first + count`; the outputs of every other
-    /// point are left as they are (the caller starts them at "no contact"). Branch-free: every
-    /// point's shape is looked up in the table (a gather), its fat point mapped into that
-    /// shape's frame, and the outputs chosen by selects, so the loop vectorises. Every slice is
-    /// its own argument, so the compiler knows they do not overlap.
+    /// [`ContactState::update`] for every free point at once, branch-free (selects only), so
+    /// the loop vectorises; returns how many points it holds and how many got a full-pass
+    /// direction. Per point: a push of this phase makes a new contact from the push's record
+    /// (`l*` its world direction, `ps*`/`pn*` its landing point and direction in the pushing
+    /// shape's frame); a checked hold (`check`) is kept, one step older, where the check kept
+    /// it (`kept`, with its world normal `w*`), and is released otherwise, keeping its normal
+    /// for one step of the error estimate. Every slice is its own argument, so the compiler
+    /// knows they do not overlap.
     fn update_pass(
         pushed: &[u8],
-        last_shape: &[u32],
+        push_shape: &[u32],
         l0: &[f32],
         l1: &[f32],
         l2: &[f32],
-        q0: &[f32],
-        q1: &[f32],
-        q2: &[f32],
+        ps0: &[f32],
+        ps1: &[f32],
+        ps2: &[f32],
+        pn0: &[f32],
+        pn1: &[f32],
+        pn2: &[f32],
+        check: &[u8],
+        kept: &[u8],
+        w0: &[f32],
+        w1: &[f32],
+        w2: &[f32],
+        first_pushed: &[u8],
+        fn0: &[f32],
+        fn1: &[f32],
+        fn2: &[f32],
         old_shape: &[u32],
         old_age: &[u8],
-        oh0: &[f32],
-        oh1: &[f32],
-        oh2: &[f32],
         os0: &[f32],
         os1: &[f32],
         os2: &[f32],
@@ -381,9 +420,6 @@ crate::sim::simd::multiversion! {
         on1: &[f32],
         on2: &[f32],
         holding: bool,
-        table: &[[f32; TABLE_SHAPES]; 12],
-        first: u32,
-        count: u32,
         shape: &mut [u32],
         age: &mut [u8],
         s0: &mut [f32],
@@ -398,20 +434,20 @@ crate::sim::simd::multiversion! {
         a0: &mut [f32],
         a1: &mut [f32],
         a2: &mut [f32],
-        first_pushed: &[u8],
-        fn0: &[f32],
-        fn1: &[f32],
-        fn2: &[f32],
         f0: &mut [f32],
         f1: &mut [f32],
         f2: &mut [f32],
     ) -> (usize, usize) {
         let n = pushed.len().min(shape.len());
-        let (pushed, last_shape) = (&pushed[..n], &last_shape[..n]);
+        let (pushed, push_shape) = (&pushed[..n], &push_shape[..n]);
+        let (check, kept) = (&check[..n], &kept[..n]);
         let (l0, l1, l2) = (&l0[..n], &l1[..n], &l2[..n]);
-        let (q0, q1, q2) = (&q0[..n], &q1[..n], &q2[..n]);
+        let (ps0, ps1, ps2) = (&ps0[..n], &ps1[..n], &ps2[..n]);
+        let (pn0, pn1, pn2) = (&pn0[..n], &pn1[..n], &pn2[..n]);
+        let (w0, w1, w2) = (&w0[..n], &w1[..n], &w2[..n]);
+        let first_pushed = &first_pushed[..n];
+        let (fn0, fn1, fn2) = (&fn0[..n], &fn1[..n], &fn2[..n]);
         let (old_shape, old_age) = (&old_shape[..n], &old_age[..n]);
-        let (oh0, oh1, oh2) = (&oh0[..n], &oh1[..n], &oh2[..n]);
         let (os0, os1, os2) = (&os0[..n], &os1[..n], &os2[..n]);
         let (on0, on1, on2) = (&on0[..n], &on1[..n], &on2[..n]);
         let (shape, age) = (&mut shape[..n], &mut age[..n]);
@@ -419,102 +455,76 @@ crate::sim::simd::multiversion! {
         let (m0, m1, m2) = (&mut m0[..n], &mut m1[..n], &mut m2[..n]);
         let (h0, h1, h2) = (&mut h0[..n], &mut h1[..n], &mut h2[..n]);
         let (a0, a1, a2) = (&mut a0[..n], &mut a1[..n], &mut a2[..n]);
-        let first_pushed = &first_pushed[..n];
-        let (fn0, fn1, fn2) = (&fn0[..n], &fn1[..n], &fn2[..n]);
         let (f0, f1, f2) = (&mut f0[..n], &mut f1[..n], &mut f2[..n]);
         let (mut held_count, mut first_count) = (0u32, 0u32);
         for f in 0..n {
             let p = pushed[f] != 0;
-            let k = if p { last_shape[f] } else { old_shape[f] };
-            let local = k.wrapping_sub(first);
-            let here = local < count;
-            let r: [f32; 12] = std::array::from_fn(|c| table[c][local as usize % TABLE_SHAPES]);
-            // The fat point in the shape frame: R q + t (R's columns are r[0..3], r[3..6],
-            // r[6..9], t is r[9..12]).
-            let (qx, qy, qz) = (q0[f], q1[f], q2[f]);
-            let lx = r[0] * qx + r[3] * qy + r[6] * qz + r[9];
-            let ly = r[1] * qx + r[4] * qy + r[7] * qz + r[10];
-            let lz = r[2] * qx + r[5] * qy + r[8] * qz + r[11];
-            // A new push: its world direction, and that direction in the shape frame.
-            let (wx, wy, wz) = (l0[f], l1[f], l2[f]);
-            let px = r[0] * wx + r[3] * wy + r[6] * wz;
-            let py = r[1] * wx + r[4] * wy + r[7] * wz;
-            let pz = r[2] * wx + r[5] * wy + r[8] * wz;
-            // An old contact: how far the fat point is off its tangent plane and along it.
-            let (nx, ny, nz) = (on0[f], on1[f], on2[f]);
-            let (dx, dy, dz) = (lx - os0[f], ly - os1[f], lz - os2[f]);
-            let gap = dx * nx + dy * ny + dz * nz;
-            let slide2 = dx * dx + dy * dy + dz * dz - gap * gap;
-            let held = (oh0[f] != 0.0) | (oh1[f] != 0.0) | (oh2[f] != 0.0);
-            let older = old_age[f].saturating_add(1);
-            let keep = holding
-                & !p
-                & held
-                & (older < HOLD_STEPS)
-                & (gap <= HOLD_GAP_M)
-                & (slide2 <= HOLD_SLIDE_M * HOLD_SLIDE_M);
-            // Released: no hold, but the error estimate still leaves this step's motion into
-            // the muscle to the constraints (the point falls back and is pushed).
-            let released = !p & held & !keep;
-            // The old contact's normal in the world: Rᵀ n (R is a rotation).
-            let ox = r[0] * nx + r[1] * ny + r[2] * nz;
-            let oy = r[3] * nx + r[4] * ny + r[5] * nz;
-            let oz = r[6] * nx + r[7] * ny + r[8] * nz;
+            let checked = check[f] != 0;
+            let keep = checked & (kept[f] != 0);
+            let released = checked & !keep;
             let contact = p | keep;
-            let (ux, uy, uz) = if p { (wx, wy, wz) } else { (ox, oy, oz) };
+            shape[f] = if p {
+                push_shape[f]
+            } else if keep {
+                old_shape[f]
+            } else {
+                NONE
+            };
+            age[f] = if keep { old_age[f].saturating_add(1) } else { 0 };
+            let pick = |new: f32, kept: f32| -> f32 {
+                if p {
+                    new
+                } else if keep {
+                    kept
+                } else {
+                    0.0
+                }
+            };
+            s0[f] = pick(ps0[f], os0[f]);
+            s1[f] = pick(ps1[f], os1[f]);
+            s2[f] = pick(ps2[f], os2[f]);
+            m0[f] = pick(pn0[f], on0[f]);
+            m1[f] = pick(pn1[f], on1[f]);
+            m2[f] = pick(pn2[f], on2[f]);
+            // The contact's world normal: the push's, or the one the check found.
+            let (ux, uy, uz) = if p { (l0[f], l1[f], l2[f]) } else { (w0[f], w1[f], w2[f]) };
             let absorbs = contact | released;
             let holds = holding & contact;
-            shape[f] = if here { if contact { k } else { NONE } } else { shape[f] };
-            age[f] = if here { if keep { older } else { 0 } } else { age[f] };
-            let pick = |new: f32, kept: f32, out: f32| -> f32 {
-                if here {
-                    if p {
-                        new
-                    } else if keep {
-                        kept
-                    } else {
-                        0.0
-                    }
-                } else {
-                    out
-                }
-            };
-            s0[f] = pick(lx, os0[f], s0[f]);
-            s1[f] = pick(ly, os1[f], s1[f]);
-            s2[f] = pick(lz, os2[f], s2[f]);
-            m0[f] = pick(px, nx, m0[f]);
-            m1[f] = pick(py, ny, m1[f]);
-            m2[f] = pick(pz, nz, m2[f]);
-            let normal = |u: f32, on: bool, out: f32| -> f32 {
-                if here {
-                    if on { u } else { 0.0 }
-                } else {
-                    out
-                }
-            };
-            a0[f] = normal(ux, absorbs, a0[f]);
-            a1[f] = normal(uy, absorbs, a1[f]);
-            a2[f] = normal(uz, absorbs, a2[f]);
-            h0[f] = normal(ux, holds, h0[f]);
-            h1[f] = normal(uy, holds, h1[f]);
-            h2[f] = normal(uz, holds, h2[f]);
-            let first = here & !holding & p & (first_pushed[f] != 0);
-            let first_normal = |n: f32, out: f32| -> f32 {
-                if first {
-                    n
-                } else if here {
-                    0.0
-                } else {
-                    out
-                }
-            };
-            f0[f] = first_normal(fn0[f], f0[f]);
-            f1[f] = first_normal(fn1[f], f1[f]);
-            f2[f] = first_normal(fn2[f], f2[f]);
-            held_count += u32::from(here & holds);
+            a0[f] = if absorbs { ux } else { 0.0 };
+            a1[f] = if absorbs { uy } else { 0.0 };
+            a2[f] = if absorbs { uz } else { 0.0 };
+            h0[f] = if holds { ux } else { 0.0 };
+            h1[f] = if holds { uy } else { 0.0 };
+            h2[f] = if holds { uz } else { 0.0 };
+            let first = !holding & p & (first_pushed[f] != 0);
+            f0[f] = if first { fn0[f] } else { 0.0 };
+            f1[f] = if first { fn1[f] } else { 0.0 };
+            f2[f] = if first { fn2[f] } else { 0.0 };
+            held_count += u32::from(holds);
             first_count += u32::from(first);
         }
         (held_count as usize, first_count as usize)
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// `check[f] = 1` where point `f` is held (a non-zero hold normal `h*`) and was not pushed
+    /// again, with `holding` on; 0 elsewhere.
+    fn mark_checks(
+        h0: &[f32],
+        h1: &[f32],
+        h2: &[f32],
+        pushed: &[u8],
+        holding: bool,
+        check: &mut [u8],
+    ) {
+        let n = h0.len().min(h1.len()).min(h2.len()).min(pushed.len()).min(check.len());
+        let (h0, h1, h2, pushed) = (&h0[..n], &h1[..n], &h2[..n], &pushed[..n]);
+        let check = &mut check[..n];
+        for f in 0..n {
+            let held = (h0[f] != 0.0) | (h1[f] != 0.0) | (h2[f] != 0.0);
+            check[f] = u8::from(holding & held & (pushed[f] == 0));
+        }
     }
 }
 
@@ -580,7 +590,8 @@ mod tests {
         phase_with_first(old, shapes, fat, pushes, &first, holding)
     }
 
-    /// [`phase`] where the full pass pushed point `f` in direction `first[f]`.
+    /// [`phase`] where the full pass pushed point `f` in direction `first[f]`. The pushes are
+    /// recorded in their shape's frame as the constraint stages record them.
     fn phase_with_first(
         old: &ContactState,
         shapes: &[ShapeInstance],
@@ -595,23 +606,40 @@ mod tests {
             .iter()
             .map(|p| p.map_or(Vec3::ZERO, |p| p.1))
             .collect();
+        let in_frame = |f: usize, point: bool| {
+            pushes[f].map_or(Vec3::ZERO, |(k, dir)| {
+                let t = &shapes[k as usize].shape_from_world;
+                if point {
+                    t.transform_point3(fat[f])
+                } else {
+                    t.transform_vector3(dir)
+                }
+            })
+        };
+        let surfaces: Vec<Vec3> = (0..fat.len()).map(|f| in_frame(f, true)).collect();
+        let normals: Vec<Vec3> = (0..fat.len()).map(|f| in_frame(f, false)).collect();
         let first_pushed: Vec<u8> = first.iter().map(|p| u8::from(p.is_some())).collect();
         let first: Vec<Vec3> = first.iter().map(|p| p.unwrap_or(Vec3::ZERO)).collect();
         let (dirs, fat, first) = (soa(&dirs), soa(fat), soa(&first));
+        let (surfaces, normals) = (soa(&surfaces), soa(&normals));
         let mut new = ContactState::default();
         new.update(
             old,
             &PhaseEnd {
                 pushed: &pushed,
-                last_shape: &last_shape,
-                last_normal: &dirs,
-                fat_points: &fat,
+                pushes: Pushes {
+                    shape: &last_shape,
+                    normal: &dirs,
+                    surface_shape: &surfaces,
+                    normal_shape: &normals,
+                    fat_points: &fat,
+                },
                 shapes,
                 first_pushed: &first_pushed,
                 first_normal: &first,
             },
             holding,
-            &mut ShapeTable::default(),
+            &mut UpdateScratch::default(),
         );
         new
     }
@@ -766,19 +794,13 @@ mod tests {
     }
 
     #[test]
-    fn characters_with_more_shapes_than_a_table_holds_are_taken_in_chunks() {
-        let count = 2 * TABLE_SHAPES + 7;
+    fn contacts_name_any_of_many_shapes_and_a_lost_shape_releases() {
+        let count = 300;
         let shapes: Vec<ShapeInstance> = (0..count)
             .map(|k| sphere(Vec3::new(k as f32, 0.0, 0.0)))
             .collect();
         let up = Vec3::Y;
-        let picks = [
-            3,
-            TABLE_SHAPES - 1,
-            TABLE_SHAPES,
-            TABLE_SHAPES + 5,
-            count - 1,
-        ];
+        let picks = [3, 255, 256, count - 1];
         let fat: Vec<Vec3> = picks
             .iter()
             .map(|&k| Vec3::new(k as f32, 0.05, 0.0))
@@ -796,6 +818,10 @@ mod tests {
             assert!(get(&s1.hold, f).abs_diff_eq(up, 1e-5));
         }
         assert_eq!(s1.held_points(), picks.len());
+        // The character lost its last shapes (an edit): their holds end.
+        let s2 = phase(&s1, &shapes[..200], &fat, &vec![None; picks.len()], true);
+        assert_eq!(s2.held_points(), 1);
+        assert_eq!(s2.shape[3], NONE);
     }
 
     #[test]

@@ -44,7 +44,7 @@ use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
 use crate::clock::Clock;
 use anchors::AnchorTable;
 use constraints::{Broadphase, ConstraintInput};
-use contacts::{ContactState, PhaseEnd, ShapeTable};
+use contacts::{ContactState, PhaseEnd, UpdateScratch};
 use forces::{ForceInput, ForceScratch, Materials, Springs, StepKinematics};
 
 /// Name of this model kind in snapshots and reports.
@@ -126,7 +126,7 @@ struct Work {
     /// `Core::contacts` at the checkpoint.
     checkpoint_contacts: ContactState,
     /// Scratch of [`ContactState::update`].
-    shape_table: ShapeTable,
+    contact_scratch: UpdateScratch,
     /// Per free point, 1 where the current candidate's full pass pushed it, with the direction
     /// (world, SoA; see [`PhaseEnd::first_normal`]).
     first_mask: Vec<u8>,
@@ -1297,7 +1297,7 @@ fn constrain_candidate(
         // The projection alone also leaves the full pass's push direction to the error
         // estimate (see `ContactState::update`).
         w.first_mask.clone_from(&w.contact_mask);
-        for (first, last) in w.first_normal.iter_mut().zip(w.broad.last_pushes().1) {
+        for (first, last) in w.first_normal.iter_mut().zip(w.broad.pushes().normal) {
             first.clone_from(last);
         }
     } else {
@@ -1353,20 +1353,17 @@ fn constrain_candidate(
             outcome.worst = second.worst;
         }
     }
-    let (last_shape, last_normal, fat_points) = w.broad.last_pushes();
     w.candidate_contacts.update(
         &core.contacts,
         &PhaseEnd {
             pushed: &w.contact_mask,
-            last_shape,
-            last_normal,
-            fat_points,
+            pushes: w.broad.pushes(),
             shapes: shapes_end,
             first_pushed: &w.first_mask,
             first_normal: &w.first_normal,
         },
         core.hold_contacts,
-        &mut w.shape_table,
+        &mut w.contact_scratch,
     );
     absorb_cancelled_velocity(
         free,
