@@ -44,6 +44,7 @@ fn simulate_prints_the_documented_json() {
         "recheck_passes_per_phase",
         "rechecked_points_per_phase",
         "unsettled_phases",
+        "broadphase_rebuilds",
         "recheck_fraction",
         "held_points_per_step",
         "point_steps_per_second",

@@ -132,6 +132,8 @@ struct Report {
     rechecked_points_per_phase: f64,
     /// Constraint phases whose re-checks stopped at their limit still correcting.
     unsettled_phases: u64,
+    /// Rebuilds of the constraint broadphase's candidate runs.
+    broadphase_rebuilds: u64,
     nonfinite_events: u64,
     /// Simulated time at which the guard gave up (every attempt non-finite or exploding),
     /// seconds; `None` when the run reached its end.
@@ -323,6 +325,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         recheck_passes_per_phase: rechecks.0,
         rechecked_points_per_phase: rechecks.1,
         unsettled_phases: total.unsettled_phases,
+        broadphase_rebuilds: model.broadphase_rebuilds(),
         nonfinite_events: total.nonfinite_events,
         stalled_at_s: (total.end == AdvanceEnd::Stalled).then_some(sim_s),
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
@@ -570,6 +573,13 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         r.constraint_phases,
         r.unsettled_phases,
         r.recheck_fraction
+    )?;
+    writeln!(
+        out,
+        "{:<28}{} ({:.1} constraint phases per rebuild)",
+        "Broadphase rebuilds",
+        r.broadphase_rebuilds,
+        r.constraint_phases as f64 / r.broadphase_rebuilds.max(1) as f64
     )?;
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
     if let Some(t) = r.stalled_at_s {
