@@ -253,6 +253,32 @@ impl ContactState {
             (p.normal, p.surface_shape, p.normal_shape);
         let [w0, w1, w2] = &scratch.normal;
         let [fn0, fn1, fn2] = end.first_normal;
+        if !holding {
+            // The projection alone: the contacts are this phase's pushes, nothing is held (the
+            // hold arrays are not read while `held` is 0), and the contact points in the shapes'
+            // frames are not needed; half the arrays of the pass below.
+            *held = 0;
+            *firsts = projection_pass(
+                end.pushed,
+                p.shape,
+                l0,
+                l1,
+                l2,
+                end.first_pushed,
+                fn0,
+                fn1,
+                fn2,
+                shape,
+                age,
+                a0,
+                a1,
+                a2,
+                f0,
+                f1,
+                f2,
+            );
+            return;
+        }
         let [os0, os1, os2] = &old.surface_shape;
         let [on0, on1, on2] = &old.normal_shape;
         (*held, *firsts) = update_pass(
@@ -311,6 +337,9 @@ impl ContactState {
     /// contact's world normal.
     fn check_holds(&self, end: &PhaseEnd<'_>, holding: bool, scratch: &mut UpdateScratch) {
         let free = end.pushed.len();
+        // A state that holds nothing may keep old hold normals from before holding was switched
+        // off (they are not read while `held` is 0).
+        let holding = holding && self.held > 0;
         let [h0, h1, h2] = &self.hold;
         let (h0, h1, h2, pushed) = (&h0[..free], &h1[..free], &h2[..free], &end.pushed[..free]);
         scratch.check.resize(free, 0);
@@ -358,7 +387,7 @@ impl ContactState {
     /// presses it in.
     pub fn hold(&self, a: &mut [f32]) {
         let free = a.len() / 3;
-        if self.shape.len() != free || self.hold.iter().any(|c| c.len() != free) {
+        if self.held == 0 || !self.sized(free) {
             return;
         }
         let [a0, a1, a2] = super::forces::blocks_mut(a, free);
@@ -513,6 +542,56 @@ crate::sim::simd::multiversion! {
 }
 
 crate::sim::simd::multiversion! {
+    /// [`ContactState::update`] with holding off, for every free point at once: a point the
+    /// phase pushed (`pushed`) gets its push's shape and world direction (`l*`) and, where the
+    /// full pass pushed it (`first_pushed`), that push's direction (`fn*`); every other point
+    /// gets none. Returns how many points got a full-pass direction. Every slice is its own
+    /// argument, so the compiler knows they do not overlap.
+    fn projection_pass(
+        pushed: &[u8],
+        push_shape: &[u32],
+        l0: &[f32],
+        l1: &[f32],
+        l2: &[f32],
+        first_pushed: &[u8],
+        fn0: &[f32],
+        fn1: &[f32],
+        fn2: &[f32],
+        shape: &mut [u32],
+        age: &mut [u8],
+        a0: &mut [f32],
+        a1: &mut [f32],
+        a2: &mut [f32],
+        f0: &mut [f32],
+        f1: &mut [f32],
+        f2: &mut [f32],
+    ) -> usize {
+        let n = pushed.len().min(shape.len());
+        let (pushed, push_shape, first_pushed) = (&pushed[..n], &push_shape[..n], &first_pushed[..n]);
+        let (l0, l1, l2) = (&l0[..n], &l1[..n], &l2[..n]);
+        let (fn0, fn1, fn2) = (&fn0[..n], &fn1[..n], &fn2[..n]);
+        let (shape, age) = (&mut shape[..n], &mut age[..n]);
+        let (a0, a1, a2) = (&mut a0[..n], &mut a1[..n], &mut a2[..n]);
+        let (f0, f1, f2) = (&mut f0[..n], &mut f1[..n], &mut f2[..n]);
+        let mut first_count = 0u32;
+        for f in 0..n {
+            let p = pushed[f] != 0;
+            let first = p & (first_pushed[f] != 0);
+            shape[f] = if p { push_shape[f] } else { NONE };
+            age[f] = 0;
+            a0[f] = if p { l0[f] } else { 0.0 };
+            a1[f] = if p { l1[f] } else { 0.0 };
+            a2[f] = if p { l2[f] } else { 0.0 };
+            f0[f] = if first { fn0[f] } else { 0.0 };
+            f1[f] = if first { fn1[f] } else { 0.0 };
+            f2[f] = if first { fn2[f] } else { 0.0 };
+            first_count += u32::from(first);
+        }
+        first_count as usize
+    }
+}
+
+crate::sim::simd::multiversion! {
     /// `check[f] = 1` where point `f` is held (a non-zero hold normal `h*`) and was not pushed
     /// again, with `holding` on; 0 elsewhere.
     fn mark_checks(
@@ -605,6 +684,21 @@ mod tests {
         first: &[Option<Vec3>],
         holding: bool,
     ) -> ContactState {
+        let mut new = ContactState::default();
+        phase_into(&mut new, old, shapes, fat, pushes, first, holding);
+        new
+    }
+
+    /// [`phase_with_first`] into the buffer `new`, whatever it held before.
+    fn phase_into(
+        new: &mut ContactState,
+        old: &ContactState,
+        shapes: &[ShapeInstance],
+        fat: &[Vec3],
+        pushes: &[Option<(u32, Vec3)>],
+        first: &[Option<Vec3>],
+        holding: bool,
+    ) {
         let pushed: Vec<u8> = pushes.iter().map(|p| u8::from(p.is_some())).collect();
         let last_shape: Vec<u32> = pushes.iter().map(|p| p.map_or(0, |p| p.0)).collect();
         let dirs: Vec<Vec3> = pushes
@@ -627,7 +721,6 @@ mod tests {
         let first: Vec<Vec3> = first.iter().map(|p| p.unwrap_or(Vec3::ZERO)).collect();
         let (dirs, fat, first) = (soa(&dirs), soa(fat), soa(&first));
         let (surfaces, normals) = (soa(&surfaces), soa(&normals));
-        let mut new = ContactState::default();
         new.update(
             old,
             &PhaseEnd {
@@ -646,7 +739,6 @@ mod tests {
             holding,
             &mut UpdateScratch::default(),
         );
-        new
     }
 
     #[test]
@@ -799,6 +891,34 @@ mod tests {
     }
 
     #[test]
+    fn holds_left_in_a_reused_buffer_are_not_taken_up_again() {
+        // The model keeps two states and swaps them, so a state written with holding off may
+        // sit in a buffer that held points when holding was on.
+        let shapes = [sphere(Vec3::ZERO)];
+        let (up, fat) = (Vec3::Y, [0.05 * Vec3::Y]);
+        let held = phase(
+            &ContactState::default(),
+            &shapes,
+            &fat,
+            &[Some((0, up))],
+            true,
+        );
+        assert_eq!(held.held_points(), 1);
+        let mut off = held.clone();
+        phase_into(&mut off, &held, &shapes, &fat, &[None], &[None], false);
+        assert_eq!((off.held_points(), off.contact_points()), (0, 0));
+        let mut a = vec![0.0f32, -9.81, 0.0];
+        off.hold(&mut a);
+        assert_eq!(a, [0.0, -9.81, 0.0], "nothing held, nothing taken away");
+        let on = phase(&off, &shapes, &fat, &[None], true);
+        assert_eq!(
+            on.held_points(),
+            0,
+            "no hold comes back from the stale buffer"
+        );
+    }
+
+    #[test]
     fn contacts_name_any_of_many_shapes_and_a_lost_shape_releases() {
         let count = 300;
         let shapes: Vec<ShapeInstance> = (0..count)
@@ -839,6 +959,7 @@ mod tests {
                 s.hold[c][f] = n[c];
                 s.absorb[c][f] = n[c];
             }
+            s.held += 1;
         }
         // Accelerations: point 0 pressed in and sideways, point 1 pulled away, point 2 pressed.
         let acc = [
