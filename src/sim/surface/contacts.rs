@@ -85,11 +85,12 @@ pub(super) struct ContactState {
     /// The push direction (the muscle's outward unit normal there), in that shape's frame.
     normal_shape: [Vec<f32>; 3],
     /// World unit normal of a held point's muscle, zero where the point is not held: the next
-    /// step's reaction ([`hold`]).
+    /// step's reaction ([`ContactState::hold`]). Read only while `held` is not 0 (a state written
+    /// with holding off leaves these arrays as its buffer had them).
     hold: [Vec<f32>; 3],
     /// World unit normal of every point pushed in the last step, held, or released in it, zero
     /// elsewhere: the next step's error estimate leaves the inward error along it to the
-    /// constraints ([`drop_inward_error`]).
+    /// constraints ([`ContactState::drop_inward_error`]).
     absorb: [Vec<f32>; 3],
     /// With holding off: for a point the last step's full pass pushed, that push's direction
     /// (a later pass of the phase may have pushed it again, into `absorb`), zero elsewhere; its
@@ -190,6 +191,8 @@ impl ContactState {
     }
 
     /// Ends every hold (holding was switched off); the contacts stay for the error estimate.
+    /// (The next update would not take the holds up again either: it writes no hold with
+    /// holding off.)
     pub fn release_all(&mut self) {
         for c in &mut self.hold {
             c.iter_mut().for_each(|v| *v = 0.0);
