@@ -284,7 +284,9 @@ impl ContactState {
         }
         let [os0, os1, os2] = &old.surface_shape;
         let [on0, on1, on2] = &old.normal_shape;
-        (*held, *firsts) = update_pass(
+        // Holding: no full-pass directions (`absorb_first` is not read while `firsts` is 0).
+        *firsts = 0;
+        *held = update_pass(
             end.pushed,
             p.shape,
             l0,
@@ -301,10 +303,6 @@ impl ContactState {
             w0,
             w1,
             w2,
-            end.first_pushed,
-            fn0,
-            fn1,
-            fn2,
             &old.shape,
             &old.age,
             os0,
@@ -313,7 +311,6 @@ impl ContactState {
             on0,
             on1,
             on2,
-            holding,
             shape,
             age,
             s0,
@@ -328,9 +325,6 @@ impl ContactState {
             a0,
             a1,
             a2,
-            f0,
-            f1,
-            f2,
         );
     }
 
@@ -400,9 +394,9 @@ impl ContactState {
 
     /// Removes `max(e·n, 0) n` from the error `e` (SoA `[x…, y…, z…]` over the free points) of
     /// each point with a contact of the last step, held or just released, along its contact
-    /// normal (and, with holding off, along its full-pass push): the step went further into the muscle
-    /// than Euler's, and the constraint phase replaces that motion (checked against ε_c,
-    /// section 4.2.3).
+    /// normal (and, with holding off, along its full-pass push): the step went further into
+    /// the muscle than Euler's, and the constraint phase replaces that motion (checked against
+    /// ε_c, section 4.2.3).
     pub fn drop_inward_error(&self, error: &mut [f32]) {
         let free = error.len() / 3;
         if !self.sized(free) {
@@ -419,9 +413,8 @@ impl ContactState {
 }
 
 crate::sim::simd::multiversion! {
-    /// [`ContactState::update`] for every free point at once, branch-free (selects only), so
-    /// the loop vectorises; returns how many points it holds and how many got a full-pass
-    /// direction. Per point: a push of this phase makes a new contact from the push's record
+    /// [`ContactState::update`] with holding on, for every free point at once, branch-free
+    /// (selects only), so the loop vectorises; returns how many points it holds. Per point: a push of this phase makes a new contact from the push's record
     /// (`l*` its world direction, `ps*`/`pn*` its landing point and direction in the pushing
     /// shape's frame); a checked hold (`check`) is kept, one step older, where the check kept
     /// it (`kept`, with its world normal `w*`), and is released otherwise, keeping its normal
@@ -444,10 +437,6 @@ crate::sim::simd::multiversion! {
         w0: &[f32],
         w1: &[f32],
         w2: &[f32],
-        first_pushed: &[u8],
-        fn0: &[f32],
-        fn1: &[f32],
-        fn2: &[f32],
         old_shape: &[u32],
         old_age: &[u8],
         os0: &[f32],
@@ -456,7 +445,6 @@ crate::sim::simd::multiversion! {
         on0: &[f32],
         on1: &[f32],
         on2: &[f32],
-        holding: bool,
         shape: &mut [u32],
         age: &mut [u8],
         s0: &mut [f32],
@@ -471,10 +459,7 @@ crate::sim::simd::multiversion! {
         a0: &mut [f32],
         a1: &mut [f32],
         a2: &mut [f32],
-        f0: &mut [f32],
-        f1: &mut [f32],
-        f2: &mut [f32],
-    ) -> (usize, usize) {
+    ) -> usize {
         let n = pushed.len().min(shape.len());
         let (pushed, push_shape) = (&pushed[..n], &push_shape[..n]);
         let (check, kept) = (&check[..n], &kept[..n]);
@@ -482,8 +467,6 @@ crate::sim::simd::multiversion! {
         let (ps0, ps1, ps2) = (&ps0[..n], &ps1[..n], &ps2[..n]);
         let (pn0, pn1, pn2) = (&pn0[..n], &pn1[..n], &pn2[..n]);
         let (w0, w1, w2) = (&w0[..n], &w1[..n], &w2[..n]);
-        let first_pushed = &first_pushed[..n];
-        let (fn0, fn1, fn2) = (&fn0[..n], &fn1[..n], &fn2[..n]);
         let (old_shape, old_age) = (&old_shape[..n], &old_age[..n]);
         let (os0, os1, os2) = (&os0[..n], &os1[..n], &os2[..n]);
         let (on0, on1, on2) = (&on0[..n], &on1[..n], &on2[..n]);
@@ -492,8 +475,7 @@ crate::sim::simd::multiversion! {
         let (m0, m1, m2) = (&mut m0[..n], &mut m1[..n], &mut m2[..n]);
         let (h0, h1, h2) = (&mut h0[..n], &mut h1[..n], &mut h2[..n]);
         let (a0, a1, a2) = (&mut a0[..n], &mut a1[..n], &mut a2[..n]);
-        let (f0, f1, f2) = (&mut f0[..n], &mut f1[..n], &mut f2[..n]);
-        let (mut held_count, mut first_count) = (0u32, 0u32);
+        let mut held_count = 0u32;
         for f in 0..n {
             let p = pushed[f] != 0;
             let checked = check[f] != 0;
@@ -526,21 +508,15 @@ crate::sim::simd::multiversion! {
             // The contact's world normal: the push's, or the one the check found.
             let (ux, uy, uz) = if p { (l0[f], l1[f], l2[f]) } else { (w0[f], w1[f], w2[f]) };
             let absorbs = contact | released;
-            let holds = holding & contact;
             a0[f] = if absorbs { ux } else { 0.0 };
             a1[f] = if absorbs { uy } else { 0.0 };
             a2[f] = if absorbs { uz } else { 0.0 };
-            h0[f] = if holds { ux } else { 0.0 };
-            h1[f] = if holds { uy } else { 0.0 };
-            h2[f] = if holds { uz } else { 0.0 };
-            let first = !holding & p & (first_pushed[f] != 0);
-            f0[f] = if first { fn0[f] } else { 0.0 };
-            f1[f] = if first { fn1[f] } else { 0.0 };
-            f2[f] = if first { fn2[f] } else { 0.0 };
-            held_count += u32::from(holds);
-            first_count += u32::from(first);
+            h0[f] = if contact { ux } else { 0.0 };
+            h1[f] = if contact { uy } else { 0.0 };
+            h2[f] = if contact { uz } else { 0.0 };
+            held_count += u32::from(contact);
         }
-        (held_count as usize, first_count as usize)
+        held_count as usize
     }
 }
 
