@@ -3,6 +3,8 @@
 
 mod cmd;
 
+use std::process::ExitCode;
+
 use clap::{Parser, Subcommand};
 
 /// leman: build and animate elastically deformable layered characters in head-tracked stereo.
@@ -40,7 +42,27 @@ enum Command {
     Simulate(cmd::simulate::Args),
 }
 
-fn main() -> anyhow::Result<()> {
+/// Runs the command; an error is printed as its message and its causes, one per line, with
+/// exit status 1. (Returning the error from `main` would print its `Debug` form, which adds a
+/// stack trace whenever `RUST_BACKTRACE` is set: noise under a message meant for the user.)
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("Error: {err}");
+            let mut causes = err.chain().skip(1).peekable();
+            if causes.peek().is_some() {
+                eprintln!("\nCaused by:");
+                for (i, cause) in causes.enumerate() {
+                    eprintln!("    {i}: {cause}");
+                }
+            }
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()

@@ -240,6 +240,49 @@ fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
 }
 
 #[test]
+fn errors_print_their_message_and_causes_without_a_stack_trace() {
+    // `RUST_BACKTRACE=1` is common on developers' machines; a user-facing error stays a
+    // message (and its causes), exit status 1.
+    let mut child = leman()
+        .env("RUST_BACKTRACE", "1")
+        .env("RUST_LIB_BACKTRACE", "1")
+        .args([
+            "simulate",
+            "assets/characters/penguin_16.toml",
+            "--seconds",
+            "0.05",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("leman starts");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("leman ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(
+        lines.first(),
+        Some(&"Error: writing the report to standard output"),
+        "{stderr}"
+    );
+    assert!(lines.contains(&"Caused by:"), "{stderr}");
+    assert!(
+        !stderr.to_lowercase().contains("backtrace") && !stderr.contains("main.rs"),
+        "{stderr}"
+    );
+
+    let out = leman()
+        .env("RUST_BACKTRACE", "1")
+        .args(["simulate", "no_such_character"])
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
+}
+
+#[test]
 fn simulate_motion_none_holds_the_neutral_posture() {
     // As `--help` says: `--motion none` runs without a motion (the JSON's motion is null).
     let v = simulate_json(&["penguin_16", "--motion", "none", "--seconds", "0.1"]);
