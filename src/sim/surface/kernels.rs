@@ -19,9 +19,11 @@ pub struct Batch {
     pub point: Vec<u32>,
     /// Shape-space coordinates, metres.
     pub p: [Vec<f32>; 3],
-    /// `F` at `p` (negative inside).
+    /// `F` at `p` (negative inside): the first [`len`](Self::len) entries are the last
+    /// [`evaluate`](Self::evaluate)'s, any beyond are stale.
     pub value: Vec<f32>,
-    /// `∇F` at `p`, shape space (not normalised).
+    /// `∇F` at `p`, shape space (not normalised), of the last evaluation with gradients; as
+    /// with `value`, only the first [`len`](Self::len) entries belong to the batch.
     pub grad: [Vec<f32>; 3],
     /// Scratch: rest-space coordinates.
     rest: [Vec<f32>; 3],
@@ -168,18 +170,26 @@ impl Batch {
         self.evaluate_padded(geometry, want_gradient, n);
         for c in 0..3 {
             self.p[c].truncate(len);
-            self.grad[c].truncate(len);
         }
-        self.value.truncate(len);
     }
 
     /// [`evaluate`](Self::evaluate) over the first `n` positions of `p` (`n` at least the
-    /// batch length: the padding is evaluated too), leaving `n` values and gradients.
+    /// batch length: the padding is evaluated too), leaving at least `n` values (and
+    /// gradients), of which the first `n` are this call's.
     fn evaluate_padded(&mut self, geometry: &ShapeGeometry, want_gradient: bool, n: usize) {
-        self.value.resize(n, 0.0);
-        for c in 0..3 {
-            self.grad[c].resize(n, 0.0);
+        // The kernels write every one of the first `n` entries, so the arrays only grow (no
+        // zero fill of what is written next; the gradient is left alone for signs only).
+        // (Spheres and cylinders always compute their gradient with the value.)
+        let superellipsoid_signs =
+            !want_gradient && matches!(geometry.primitive, Primitive::Superellipsoid { .. });
+        let gn = if superellipsoid_signs { 0 } else { n };
+        grow_to(&mut self.value, n);
+        if gn > 0 {
+            for c in &mut self.grad {
+                grow_to(c, n);
+            }
         }
+        let value = &mut self.value[..n];
         let deformed = !geometry.is_undeformed();
         if deformed {
             for c in 0..3 {
@@ -219,34 +229,21 @@ impl Batch {
         }
         let [x, y, z] = if deformed { &self.rest } else { &self.p };
         let [gx, gy, gz] = &mut self.grad;
+        let (gx, gy, gz) = (&mut gx[..gn], &mut gy[..gn], &mut gz[..gn]);
         match geometry.primitive {
-            Primitive::Sphere { radius_m } => {
-                sphere(radius_m, x, y, z, &mut self.value, gx, gy, gz)
-            }
+            Primitive::Sphere { radius_m } => sphere(radius_m, x, y, z, value, gx, gy, gz),
             Primitive::Superellipsoid { radii_m, e1, e2 } => {
                 if want_gradient {
-                    superellipsoid(
-                        radii_m,
-                        e1,
-                        e2,
-                        x,
-                        y,
-                        z,
-                        &mut self.value,
-                        gx,
-                        gy,
-                        gz,
-                        &mut self.tmp,
-                    )
+                    superellipsoid(radii_m, e1, e2, x, y, z, value, gx, gy, gz, &mut self.tmp)
                 } else {
-                    superellipsoid_sign(radii_m, e1, e2, x, y, z, &mut self.value)
+                    superellipsoid_sign(radii_m, e1, e2, x, y, z, value)
                 }
             }
             Primitive::Cylinder { .. } => {
                 for i in 0..n {
                     let q = Vec3::new(x[i], y[i], z[i]);
                     let (v, g) = geometry.primitive.value_and_gradient(q);
-                    self.value[i] = v;
+                    value[i] = v;
                     gx[i] = g.x;
                     gy[i] = g.y;
                     gz[i] = g.z;
@@ -256,6 +253,13 @@ impl Batch {
         if deformed && want_gradient {
             gradient_to_shape(&self.jac, gx, gy, gz);
         }
+    }
+}
+
+/// Makes `v` at least `n` long, zero-filling only what it adds.
+fn grow_to(v: &mut Vec<f32>, n: usize) {
+    if v.len() < n {
+        v.resize(n, 0.0);
     }
 }
 
