@@ -353,14 +353,19 @@ impl Broadphase {
                 }
                 sc.hit[len..].fill(0);
                 collect_hits(&sc.hit, &mut sc.hit_index);
-                let first = self.runs.len();
-                for &i in &sc.hit_index {
-                    let f = a as u32 + i;
-                    let own = self.runs.len() > first;
-                    match self.runs.last_mut() {
-                        Some(last) if own && f <= last.1 + run_gap => last.1 = f + 1,
-                        _ => self.runs.push((f, f + 1)),
+                // The shape's runs: a new one where the next hit is more than `run_gap`
+                // past the end of the current one.
+                if let Some((&i0, hits)) = sc.hit_index.split_first() {
+                    let (mut start, mut end) = (a as u32 + i0, a as u32 + i0 + 1);
+                    for &i in hits {
+                        let f = a as u32 + i;
+                        if f > end + run_gap {
+                            self.runs.push((start, end));
+                            start = f;
+                        }
+                        end = f + 1;
                     }
+                    self.runs.push((start, end));
                 }
             }
             self.run_offsets.push(self.runs.len() as u32);
@@ -1144,13 +1149,15 @@ fn gated_in<'a>(gated: &'a [u32], before: &[u32], a: usize, b: usize) -> &'a [u3
 /// `0..=gate.len()`).
 fn index_gates(gate: &[u8], gated: &mut Vec<u32>, before: &mut Vec<u32>) {
     collect_hits(gate, gated);
-    before.clear();
-    before.reserve(gate.len() + 1);
+    // Written by index into a sized array (a push per point kept a capacity check and a
+    // length store in the loop: about 1.5 % of the torso's time).
+    before.resize(gate.len() + 1, 0);
+    let (first, rest) = before.split_at_mut(1);
+    first[0] = 0;
     let mut count = 0u32;
-    before.push(0);
-    for &g in gate {
+    for (b, &g) in rest.iter_mut().zip(gate) {
         count += u32::from(g != 0);
-        before.push(count);
+        *b = count;
     }
 }
 
