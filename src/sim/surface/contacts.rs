@@ -74,7 +74,7 @@ fn rests_on_plane(local: Vec3, surface: Vec3, normal: Vec3) -> bool {
 
 /// Per free point: the contact the constraint phase left it in. Part of the model's state, so a
 /// snapshot or checkpoint continues exactly as the run it was taken from.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Default, PartialEq)]
 pub(super) struct ContactState {
     /// Index of the shape the point rests on, or [`NONE`].
     shape: Vec<u32>,
@@ -104,6 +104,29 @@ pub(super) struct ContactState {
     held: usize,
     /// How many points `absorb_first` covers.
     firsts: usize,
+}
+
+impl Clone for ContactState {
+    fn clone(&self) -> Self {
+        let mut c = Self::default();
+        c.clone_from(self);
+        c
+    }
+
+    /// Field by field into the existing arrays: the model saves a checkpoint of its contacts
+    /// every few steps, and the derived `clone_from` would allocate every array anew.
+    fn clone_from(&mut self, source: &Self) {
+        self.shape.clone_from(&source.shape);
+        self.age.clone_from(&source.age);
+        let sources = (source.surface_shape.iter().chain(&source.normal_shape))
+            .chain(source.hold.iter().chain(&source.absorb))
+            .chain(&source.absorb_first);
+        for (to, from) in self.vectors_mut().zip(sources) {
+            to.clone_from(from);
+        }
+        self.held = source.held;
+        self.firsts = source.firsts;
+    }
 }
 
 /// What a constraint phase left at the free points, for [`ContactState::update`].
@@ -796,6 +819,30 @@ mod tests {
         // A released point has no contact left to keep.
         let after = phase(&aged, &shapes, &[on_top, far], &[None, None], true);
         assert_eq!(get(&after.absorb, 0), Vec3::ZERO);
+    }
+
+    #[test]
+    fn a_checkpoint_copy_into_a_used_buffer_is_the_state_itself() {
+        let centre = Vec3::new(0.3, 0.1, -0.2);
+        let shapes = [sphere(Vec3::ZERO), sphere(centre)];
+        let on_top = centre + 0.05 * Vec3::Y;
+        let far = Vec3::splat(2.0);
+        let state = phase(
+            &ContactState::default(),
+            &shapes,
+            &[on_top, far, Vec3::new(0.0, -0.05, 0.0)],
+            &[Some((1, Vec3::Y)), None, Some((0, -Vec3::Y))],
+            true,
+        );
+        assert_eq!(state.held_points(), 2);
+        // A buffer of another size with other contents, as a checkpoint's is.
+        let mut copy = ContactState::default();
+        copy.clear(7);
+        copy.surface_shape[1][4] = 1.0;
+        copy.held = 3;
+        copy.clone_from(&state);
+        assert_eq!(copy, state);
+        assert_eq!(state.clone(), state);
     }
 
     #[test]
