@@ -369,36 +369,36 @@ impl ContactState {
         for c in &mut scratch.normal {
             c.resize(free, 0.0);
         }
+        // Every array sliced to the free points once, so the loop's indexing needs no checks
+        // (`checked` lists indices below `free`).
         let [q0, q1, q2] = end.pushes.fat_points;
+        let (q0, q1, q2) = (&q0[..free], &q1[..free], &q2[..free]);
+        let [s0, s1, s2] = &self.surface_shape;
+        let (s0, s1, s2) = (&s0[..free], &s1[..free], &s2[..free]);
+        let [m0, m1, m2] = &self.normal_shape;
+        let (m0, m1, m2) = (&m0[..free], &m1[..free], &m2[..free]);
+        let (shape, age) = (&self.shape[..free], &self.age[..free]);
+        let kept = &mut scratch.kept[..free];
+        let [w0, w1, w2] = &mut scratch.normal;
+        let (w0, w1, w2) = (&mut w0[..free], &mut w1[..free], &mut w2[..free]);
         for &f in &scratch.checked {
             let f = f as usize;
-            let Some(s) = end.shapes.get(self.shape[f] as usize) else {
-                // No such shape any more: released, with no direction to keep.
-                scratch.kept[f] = 0;
-                for c in &mut scratch.normal {
-                    c[f] = 0.0;
+            // No such shape any more: released, with no direction to keep.
+            let (keep, world) = match end.shapes.get(shape[f] as usize) {
+                None => (false, Vec3::ZERO),
+                Some(s) => {
+                    let local = s
+                        .shape_from_world
+                        .transform_point3(Vec3::new(q0[f], q1[f], q2[f]));
+                    let surface = Vec3::new(s0[f], s1[f], s2[f]);
+                    let normal = Vec3::new(m0[f], m1[f], m2[f]);
+                    let young = age[f].saturating_add(1) < HOLD_STEPS;
+                    let keep = young & rests_on_plane(local, surface, normal);
+                    (keep, s.world_from_shape.transform_vector3(normal))
                 }
-                continue;
             };
-            let local = s
-                .shape_from_world
-                .transform_point3(Vec3::new(q0[f], q1[f], q2[f]));
-            let surface = Vec3::new(
-                self.surface_shape[0][f],
-                self.surface_shape[1][f],
-                self.surface_shape[2][f],
-            );
-            let normal = Vec3::new(
-                self.normal_shape[0][f],
-                self.normal_shape[1][f],
-                self.normal_shape[2][f],
-            );
-            let young = self.age[f].saturating_add(1) < HOLD_STEPS;
-            scratch.kept[f] = u8::from(young & rests_on_plane(local, surface, normal));
-            let world = s.world_from_shape.transform_vector3(normal);
-            for c in 0..3 {
-                scratch.normal[c][f] = world[c];
-            }
+            kept[f] = u8::from(keep);
+            (w0[f], w1[f], w2[f]) = (world.x, world.y, world.z);
         }
     }
 
