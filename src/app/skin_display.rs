@@ -123,7 +123,7 @@ pub fn keep_outside(
                 continue;
             }
             test.evaluate(&s.geometry, false);
-            inside.assign_inside_of(&test);
+            inside.assign_inside_of(&test, 0.0);
             if inside.is_empty() {
                 continue;
             }

@@ -922,6 +922,36 @@ fn sphere_stage(
     moved
 }
 
+/// How far below zero a sign-only value of `geometry` ([`Batch::evaluate`] without gradients)
+/// may be while its point is certainly within half the projection tolerance of the surface
+/// (such a point is on the surface for the projection, which would leave it where it is), or 0
+/// where no such bound is at hand.
+///
+/// For an undeformed superellipsoid the sign value is `u − 1`, with `u` Barr's inside/outside
+/// function, homogeneous of degree `k = 2/e1`: along the ray from the centre through `p` the
+/// surface is at `p u^(−1/k)`, so a point inside is at most `|p| (u^(−1/k) − 1)` from it, and
+/// `|p| ≤ R = |radii|` inside. That is at most `t = tol/2` when `u ≥ (1 + t/R)^(−k)`, which
+/// holds when `1 − u ≤ y/(1 + y)` with `y = k x/(1 + x)`, `x = t/R` (from `ln(1 + x) ≥ x/(1 +
+/// x)` and `1 − e^(−y) ≥ y/(1 + y)`). The Newton step the projection would take from such a
+/// point is no longer than that ray's distance (Euler's theorem for the normalised
+/// `u^(1/k) − 1`), so leaving these points out changes no move. About 38 % of the torso's
+/// inside points were such: resting skin the last step left on its muscle. For an undeformed
+/// cylinder the value is the signed distance, so the band is `tol/2` itself. Deformed shapes
+/// are evaluated in rest space, where these distances do not hold: 0.
+fn settled_band(geometry: &ShapeGeometry) -> f32 {
+    match geometry.primitive {
+        Primitive::Superellipsoid { radii_m, e1, .. } if geometry.is_undeformed() => {
+            let x = 0.5 * PROJECTION_TOLERANCE_M / radii_m.length();
+            let y = (2.0 / e1) * x / (1.0 + x);
+            let band = y / (1.0 + y);
+            if band.is_finite() { band.max(0.0) } else { 0.0 }
+        }
+        // The cylinder's value is the signed distance itself.
+        Primitive::Cylinder { .. } if geometry.is_undeformed() => 0.5 * PROJECTION_TOLERANCE_M,
+        _ => 0.0,
+    }
+}
+
 /// Any other shape: extent-box filter over the runs, batched values, batched Newton
 /// projection. Returns the points moved.
 fn general_stage(
@@ -947,9 +977,11 @@ fn general_stage(
         return 0;
     }
     let geometry = &s.geometry;
-    // Signs first (cheap), then values and gradients of the inside points only.
+    // Signs first (cheap), then values and gradients of the inside points only, less those
+    // the signs already show to be within the projection tolerance of the surface.
     sc.batch.evaluate(geometry, false);
-    sc.project.assign_inside_of(&sc.batch);
+    sc.project
+        .assign_inside_of(&sc.batch, settled_band(geometry));
     sc.origin.clone_from(&sc.project.p);
     if sc.project.is_empty() {
         return 0;
@@ -1436,6 +1468,82 @@ mod tests {
             ShapeGeometry::new(primitive, deformations),
             Pose::new(at, turn),
         )
+    }
+
+    #[test]
+    fn the_settled_band_only_spares_points_within_half_the_tolerance() {
+        // Points inside undeformed superellipsoids and cylinders at depths around the
+        // tolerance, along rays in many directions: every point the band spares from the
+        // projection (sign value at least −band) is within tol/2 of the surface (for a
+        // superellipsoid its distance along the ray from the centre, which bounds the
+        // distance; a cylinder's value is the distance), and points well inside that are
+        // spared, so the band is not empty.
+        let tol = PROJECTION_TOLERANCE_M;
+        let shapes = [
+            Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.04, 0.09, 0.05),
+                e1: 1.0,
+                e2: 1.0,
+            },
+            Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.03, 0.12, 0.06),
+                e1: 0.4,
+                e2: 0.7,
+            },
+            Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.05, 0.05, 0.02),
+                e1: 1.8,
+                e2: 1.3,
+            },
+            Primitive::Cylinder {
+                radius_m: 0.05,
+                half_length_m: 0.15,
+            },
+        ];
+        for primitive in shapes {
+            let geometry = ShapeGeometry::new(primitive, &[]);
+            let band = settled_band(&geometry);
+            assert!(band > 0.0, "{primitive:?}");
+            let mut batch = Batch::default();
+            let mut depths = Vec::new();
+            for i in 0..400 {
+                // A spread of directions (a spiral over the sphere) and depths 0..2 tol.
+                let t = (i as f32 + 0.5) / 400.0;
+                let (polar, azimuth) = ((1.0 - 2.0 * t).acos(), 2.4 * i as f32);
+                let dir = Vec3::new(
+                    polar.sin() * azimuth.cos(),
+                    polar.cos(),
+                    polar.sin() * azimuth.sin(),
+                );
+                let surface = primitive.radial_projection(dir);
+                let depth = 2.0 * tol * ((i * 37) % 100) as f32 / 100.0;
+                let p = surface - surface.normalize() * depth;
+                batch.push(i, p);
+                depths.push(match primitive {
+                    Primitive::Cylinder { .. } => -primitive.value(p),
+                    _ => depth,
+                });
+            }
+            batch.evaluate(&geometry, false);
+            let mut spared_deep = 0;
+            for (i, &depth) in depths.iter().enumerate() {
+                let spared = batch.value[i] >= -band;
+                assert!(
+                    !spared || depth <= 0.5 * tol * 1.0001,
+                    "{primitive:?}: a point {depth} m deep is spared"
+                );
+                spared_deep += usize::from(spared && depth >= 0.1 * tol);
+            }
+            assert!(spared_deep > 0, "{primitive:?}: the band spares nothing");
+        }
+        // Deformed shapes get no band.
+        let bent = ShapeGeometry::new(
+            shapes[0],
+            &[Resolved::Bend {
+                curvature_per_m: 2.0,
+            }],
+        );
+        assert_eq!(settled_band(&bent), 0.0);
     }
 
     #[test]

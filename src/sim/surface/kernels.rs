@@ -61,10 +61,11 @@ impl Batch {
         self.p[2].push(p.z);
     }
 
-    /// Replaces the entries with those of `src` whose value is negative (inside), in order:
-    /// a branch-free compaction (every entry is written, the count advances only for the inside
-    /// ones), so a mix of inside and outside points costs no mispredicted branches.
-    pub fn assign_inside_of(&mut self, src: &Batch) {
+    /// Replaces the entries with those of `src` whose value is below `−band` (inside, and by
+    /// more than `band`; `band ≥ 0`), in order: a branch-free compaction (every entry is
+    /// written, the count advances only for the chosen ones), so a mix of inside and outside
+    /// points costs no mispredicted branches.
+    pub fn assign_inside_of(&mut self, src: &Batch, band: f32) {
         let n = src.len().min(src.value.len());
         self.point.resize(n, 0);
         for c in &mut self.p {
@@ -87,7 +88,7 @@ impl Batch {
             px[k] = sx[i];
             py[k] = sy[i];
             pz[k] = sz[i];
-            k += usize::from(value[i] < 0.0);
+            k += usize::from(value[i] < -band);
         }
         self.point.truncate(k);
         for c in &mut self.p {
@@ -737,12 +738,12 @@ mod tests {
         for k in 0..9 {
             dst.push(99, Vec3::splat(k as f32));
         }
-        dst.assign_inside_of(&src);
+        dst.assign_inside_of(&src, 0.0);
         assert_eq!(dst.point, [10, 12, 15]);
         for (i, k) in [0usize, 2, 5].into_iter().enumerate() {
             assert_eq!(dst.position(i), src.position(k));
         }
-        dst.assign_inside_of(&Batch::default());
+        dst.assign_inside_of(&Batch::default(), 0.0);
         assert!(dst.is_empty() && dst.p.iter().all(|c| c.is_empty()));
     }
 
