@@ -240,16 +240,10 @@ impl Batch {
                     superellipsoid_sign(radii_m, e1, e2, x, y, z, value)
                 }
             }
-            Primitive::Cylinder { .. } => {
-                for i in 0..n {
-                    let q = Vec3::new(x[i], y[i], z[i]);
-                    let (v, g) = geometry.primitive.value_and_gradient(q);
-                    value[i] = v;
-                    gx[i] = g.x;
-                    gy[i] = g.y;
-                    gz[i] = g.z;
-                }
-            }
+            Primitive::Cylinder {
+                radius_m,
+                half_length_m,
+            } => cylinder(radius_m, half_length_m, x, y, z, value, gx, gy, gz),
         }
         if deformed && want_gradient {
             gradient_to_shape(&self.jac, gx, gy, gz);
@@ -477,6 +471,51 @@ crate::sim::simd::multiversion! {
 }
 
 crate::sim::simd::multiversion! {
+    /// The shape model's cylinder (`character::shape`): the signed distance to the nearest
+    /// face inside and beside the cylinder, to the rim beyond both, and its gradient; the same
+    /// operations in the same order as the model, branch-free, so the values are its bits.
+    fn cylinder(
+        radius_m: f32,
+        half_length_m: f32,
+        x: &[f32],
+        y: &[f32],
+        z: &[f32],
+        value: &mut [f32],
+        gx: &mut [f32],
+        gy: &mut [f32],
+        gz: &mut [f32],
+    ) {
+        let n = value.len().min(x.len()).min(y.len()).min(z.len());
+        let (x, y, z, value) = (&x[..n], &y[..n], &z[..n], &mut value[..n]);
+        let (gx, gy, gz) = (&mut gx[..n], &mut gy[..n], &mut gz[..n]);
+        for i in 0..n {
+            let (px, py, pz) = (x[i], y[i], z[i]);
+            let rho = (px * px + pz * pz).sqrt();
+            // The radial direction (X on the axis) and the axial one.
+            let on_axis = rho <= 0.0;
+            let rx = if on_axis { 1.0 } else { px / rho };
+            let rz = if on_axis { 0.0 } else { pz / rho };
+            let ay = if py >= 0.0 { 1.0 } else { -1.0 };
+            let dx = rho - radius_m;
+            let dy = py.abs() - half_length_m;
+            let rim = (dx > 0.0) & (dy > 0.0);
+            let side = dx > dy;
+            let d = (dx * dx + dy * dy).sqrt();
+            // Beyond the rim: (radial dx + axial dy) / d, component by component.
+            let (cx, cy, cz) = (
+                (rx * dx + 0.0 * dy) / d,
+                (0.0 * dx + ay * dy) / d,
+                (rz * dx + 0.0 * dy) / d,
+            );
+            value[i] = if rim { d } else if side { dx } else { dy };
+            gx[i] = if rim { cx } else if side { rx } else { 0.0 };
+            gy[i] = if rim { cy } else if side { 0.0 } else { ay };
+            gz[i] = if rim { cz } else if side { rz } else { 0.0 };
+        }
+    }
+}
+
+crate::sim::simd::multiversion! {
     /// The shape model's superellipsoid `F = s·f^(e1/2) − 1` on the point scaled into the unit
     /// box (`character::shape`), and its gradient. One loop per term (each branch-free);
     /// `tmp` is scratch.
@@ -672,6 +711,48 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn the_cylinder_kernel_gives_the_models_bits() {
+        let cylinder = Primitive::Cylinder {
+            radius_m: 0.04,
+            half_length_m: 0.15,
+        };
+        let g = ShapeGeometry::new(cylinder, &[]);
+        let mut noise = Noise(5);
+        let mut batch = Batch::default();
+        // Random points, and the special ones: on the axis, on the mid-plane, on the side, the
+        // caps and the rim, below and above.
+        for k in 0..500u32 {
+            batch.push(k, noise.vec() * 0.25);
+        }
+        for (k, p) in [
+            Vec3::ZERO,
+            Vec3::new(0.0, 0.2, 0.0),
+            Vec3::new(0.0, -0.1, 0.0),
+            Vec3::new(0.04, 0.0, 0.0),
+            Vec3::new(0.0, 0.15, 0.02),
+            Vec3::new(0.04, -0.15, 0.0),
+            Vec3::new(-0.05, 0.16, 0.01),
+            Vec3::new(0.03, 0.0, -0.03),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            batch.push(500 + k as u32, p);
+        }
+        batch.evaluate(&g, true);
+        for i in 0..batch.len() {
+            let (v, grad) = cylinder.value_and_gradient(batch.position(i));
+            let p = batch.position(i);
+            assert_eq!(batch.value[i].to_bits(), v.to_bits(), "value at {p}");
+            assert_eq!(
+                batch.gradient(i).to_array().map(f32::to_bits),
+                grad.to_array().map(f32::to_bits),
+                "gradient at {p}"
+            );
+        }
     }
 
     #[test]
