@@ -407,15 +407,12 @@ pub fn enforce(
     };
     // Fat points r − τ n̂.
     for c in 0..3 {
-        let (g, n, q) = (
+        fat_points(
             &grid[c][m..m + free],
             &normals[c][m..m + free],
+            &input.fat_m[..free],
             &mut sc.points.q[c][..free],
         );
-        let fat = &input.fat_m[..free];
-        for f in 0..free {
-            q[f] = g[f] - n[f] * fat[f];
-        }
     }
     match only {
         None => sc.gate.fill(1),
@@ -494,6 +491,19 @@ pub fn enforce(
         }
     }
     apply_moves(input, sc, grid, normals, x, v, touched)
+}
+
+crate::sim::simd::multiversion! {
+    /// One component of the fat points `q = r − τ n̂` (eq. 6) from the skin points' `g`, their
+    /// normals' `n` and the fat `τ`. (As an index loop over the four arrays the compiler kept
+    /// it scalar: about 8 % of a re-check's instructions.)
+    fn fat_points(g: &[f32], n: &[f32], fat: &[f32], q: &mut [f32]) {
+        let len = q.len().min(g.len()).min(n.len()).min(fat.len());
+        let (g, n, fat, q) = (&g[..len], &n[..len], &fat[..len], &mut q[..len]);
+        for f in 0..len {
+            q[f] = g[f] - n[f] * fat[f];
+        }
+    }
 }
 
 /// Moves each skin point whose fat point the pass moved so that its fat point is where the
