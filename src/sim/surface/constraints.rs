@@ -834,11 +834,13 @@ impl<'a> MoveLog<'a> {
             push_normal,
             moved,
         } = points;
-        let lens = (q.iter().chain(surface_vel.iter()).chain(last_normal.iter()))
-            .chain(push_surface.iter().chain(push_normal.iter()));
-        let n = lens
-            .map(Vec::len)
-            .fold(moved_round.len().min(last_shape.len()), usize::min);
+        // The shortest array's length, as a plain minimum (a chain of iterators over the five
+        // triples stayed a called fold: about 1 % of the torso's time, the stages making a
+        // log per run).
+        let min3 = |a: &[Vec<f32>; 3]| a[0].len().min(a[1].len()).min(a[2].len());
+        let n = (min3(q).min(min3(surface_vel)).min(min3(last_normal)))
+            .min(min3(push_surface).min(min3(push_normal)))
+            .min(moved_round.len().min(last_shape.len()));
         let cut = |[x, y, z]: &'a mut [Vec<f32>; 3]| [&mut x[..n], &mut y[..n], &mut z[..n]];
         MoveLog {
             q: cut(q),
