@@ -276,6 +276,58 @@ fn guard_restores_the_last_good_state_after_an_injected_nan() {
     assert!(mesh.positions_m.iter().all(|p| p.is_finite()));
 }
 
+/// Whether the checkpoint holds exactly the model's state.
+fn checkpoint_is_state(m: &SurfaceModel) -> bool {
+    let (c, w) = (&m.core, &m.work);
+    w.checkpoint_x == c.x
+        && w.checkpoint_v == c.v
+        && w.checkpoint_t_s == c.t_s
+        && w.checkpoint_step_s == c.step_s
+        && w.checkpoint_contacts == c.contacts
+}
+
+#[test]
+fn a_checkpoint_marked_current_is_the_state_through_every_change() {
+    // `advance` skips its opening save while the checkpoint is marked current: check the mark
+    // after each way the state can change (steps, parameters, restores, resampling).
+    let (mut m, motion) = model_and_motion("penguin", 16);
+    let mut poses = MotionPoses(&motion);
+    let current = |m: &SurfaceModel| m.work.checkpoint_current;
+    let mut checks = 0;
+    let mut check = |m: &SurfaceModel, what: &str| {
+        assert!(
+            !current(m) || checkpoint_is_state(m),
+            "{what}: stale checkpoint"
+        );
+        checks += usize::from(current(m));
+    };
+    m.advance(0.1, &mut poses, &mut Unlimited, None);
+    check(&m, "after advance");
+    let snap = m.snapshot();
+    m.advance(0.2, &mut poses, &mut MaxAttempts(3), None);
+    check(&m, "after a cut-short advance");
+    m.apply(&ParameterChange::HoldContacts(false))
+        .expect("valid");
+    check(&m, "after releasing the holds");
+    m.apply(&ParameterChange::Integrator(IntegratorKind::Rk2))
+        .expect("valid");
+    check(&m, "after switching the integrator");
+    m.advance(0.3, &mut poses, &mut Unlimited, None);
+    check(&m, "after advance");
+    m.restore(&snap).expect("same model");
+    check(&m, "after restore");
+    m.set_resolution(20, 18).expect("valid");
+    check(&m, "after resampling");
+    m.advance(0.35, &mut poses, &mut Unlimited, None);
+    check(&m, "after advance");
+    // A NaN slipped in from outside: the guard goes back to the checkpoint.
+    m.core.x[3] = f32::NAN;
+    let r = m.advance(0.4, &mut poses, &mut Unlimited, None);
+    assert!(r.nonfinite_events >= 1 && all_finite(&m), "{r:?}");
+    check(&m, "after the guard's restore");
+    assert!(checks >= 5, "the mark was set only {checks} times");
+}
+
 /// Explicit Euler at the largest fixed step (10 ms) with values that explode: absurdly stiff
 /// skin, and the panel sliders' ends (tissue springs of 500 N/m on the lightest points). The
 /// guard keeps every committed state finite and reports the events; once the sane state is
