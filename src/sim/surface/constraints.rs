@@ -20,7 +20,9 @@
 //!   and projection right there). The survivors form a `Batch` whose values and gradients
 //!   are computed by the vectorised kernels (`super::kernels`); points with `F < 0` are
 //!   projected by two batched Newton steps along the gradient (a scalar exact projection for
-//!   any that do not land within [`PROJECTION_TOLERANCE_M`]). The projections become world
+//!   any that do not land within [`PROJECTION_TOLERANCE_M`]), except those whose sign value
+//!   alone shows them within half that tolerance of an undeformed shape's surface
+//!   (`settled_band`: resting skin the last step left there). The projections become world
 //!   moves, push directions and surface velocities in vectorised passes (`super::moves`);
 //!   only the writes into the per-point arrays go point by point.
 //! - **Rounds.** Shapes are visited in order and each sees the points the earlier ones moved
