@@ -66,14 +66,12 @@ impl Batch {
     }
 
     /// Replaces the entries with those of `src` whose value is below `−band` (inside, and by
-    /// more than `band`; `band ≥ 0`), in order: a branch-free compaction (every entry is
-    /// written, the count advances only for the chosen ones), so a mix of inside and outside
-    /// points costs no mispredicted branches.
+    /// more than `band`; `band ≥ 0`), in order. The chosen entries are listed first (a
+    /// vectorised comparison and the word-wise compaction of `collect_hits`, no branch per
+    /// entry), then the four arrays are gathered for those alone: about one sign-tested entry
+    /// in six is chosen, and compacting all four arrays wrote every entry.
     pub fn assign_inside_of(&mut self, src: &Batch, band: f32) {
         let n = src.len().min(src.value.len());
-        // The chosen entries' indices first (a vectorised comparison and the word-wise
-        // compaction of `collect_hits`: about one entry in six is chosen), then the four
-        // arrays gathered for those alone.
         self.mask.resize(n.next_multiple_of(8), 0);
         below(&src.value[..n], -band, &mut self.mask[..n]);
         self.mask[n..].fill(0);
