@@ -217,10 +217,11 @@ fn simulate_bad_arguments_say_what_is_wrong() {
     }
 }
 
-#[test]
-fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
-    // `leman simulate … | head -0`: the reader is gone before the report is written.
+/// Runs a short `leman simulate` whose reader is gone before the report is written (as in
+/// `leman simulate … | head -0`), with `envs` set; returns its exit code and standard error.
+fn simulate_into_a_closed_pipe(envs: &[(&str, &str)]) -> (Option<i32>, String) {
     let mut child = leman()
+        .envs(envs.iter().copied())
         .args([
             "simulate",
             "assets/characters/penguin_16.toml",
@@ -233,9 +234,15 @@ fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
         .expect("leman starts");
     drop(child.stdout.take());
     let out = child.wait_with_output().expect("leman ends");
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.status.code(), stderr)
+}
+
+#[test]
+fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
+    let (code, stderr) = simulate_into_a_closed_pipe(&[]);
     assert!(!stderr.contains("panicked"), "{stderr}");
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(code, Some(1), "{stderr}");
     assert!(stderr.contains("writing the report"), "{stderr}");
 }
 
@@ -243,23 +250,9 @@ fn simulate_into_a_closed_pipe_reports_an_error_instead_of_panicking() {
 fn errors_print_their_message_and_causes_without_a_stack_trace() {
     // `RUST_BACKTRACE=1` is common on developers' machines; a user-facing error stays a
     // message (and its causes), exit status 1.
-    let mut child = leman()
-        .env("RUST_BACKTRACE", "1")
-        .env("RUST_LIB_BACKTRACE", "1")
-        .args([
-            "simulate",
-            "assets/characters/penguin_16.toml",
-            "--seconds",
-            "0.05",
-        ])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("leman starts");
-    drop(child.stdout.take());
-    let out = child.wait_with_output().expect("leman ends");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let (code, stderr) =
+        simulate_into_a_closed_pipe(&[("RUST_BACKTRACE", "1"), ("RUST_LIB_BACKTRACE", "1")]);
+    assert_eq!(code, Some(1), "{stderr}");
     let lines: Vec<&str> = stderr.lines().collect();
     assert_eq!(
         lines.first(),
