@@ -125,13 +125,6 @@ struct Work {
     contact_mask: Vec<u8>,
     /// `Core::contacts` at the checkpoint.
     checkpoint_contacts: ContactState,
-    /// True while the checkpoint holds the current state (nothing has changed `Core`'s
-    /// positions, velocities, time, step or contacts since it was saved or restored), so
-    /// [`DeformationModel::advance`] need not save it again at its start. The contacts make a
-    /// checkpoint about 85 kB on a 32×32 skin; `leman simulate` advances in slices of 1/30 s,
-    /// and the save at the start of each repeated the one at the end of the slice before
-    /// (about 2 % of the torso's wall-clock profile).
-    checkpoint_current: bool,
     /// Scratch of [`ContactState::update`].
     contact_scratch: UpdateScratch,
     /// Per free point, 1 where the current candidate's full pass pushed it, with the direction
@@ -228,7 +221,9 @@ impl SurfaceModel {
         let core = Core::from_character(Arc::new(character), kind)?;
         let mut work = Work::default();
         work.broad.margin_m = 0.02;
-        Ok(Self { core, work })
+        let mut model = Self { core, work };
+        model.save_checkpoint();
+        Ok(model)
     }
 
     /// The character being simulated (at its original resolution).
@@ -411,6 +406,13 @@ impl SurfaceModel {
         w.start_valid = true;
     }
 
+    /// Copies the state into the checkpoint the guard goes back to. Every change of the state
+    /// from outside a step saves one (construction, [`DeformationModel::apply`], `restore`,
+    /// `set_resolution`) and so does the end of each `advance`, so between calls the checkpoint
+    /// is always the state and `advance` need not save one at its start. (It did: with
+    /// `leman simulate`'s slices of 1/30 s that copy repeated the one at the end of the slice
+    /// before, about 85 kB of contacts on a 32×32 skin and 2 % of the torso's wall-clock
+    /// profile.)
     fn save_checkpoint(&mut self) {
         // A fold without early exit, so the test vectorises (it runs every few steps).
         let finite = |a: &[f32]| a.iter().fold(true, |ok, x| ok & x.is_finite());
@@ -422,8 +424,162 @@ impl SurfaceModel {
             self.work
                 .checkpoint_contacts
                 .clone_from(&self.core.contacts);
-            self.work.checkpoint_current = true;
         }
+    }
+
+    /// [`DeformationModel::apply`] without the checkpoint that follows it.
+    fn apply_change(&mut self, change: &ParameterChange) -> Result<(), SimError> {
+        let core = &mut self.core;
+        let free = core.free();
+        let total = core.around * core.along;
+        match change {
+            ParameterChange::Stretch(sel, eta) => {
+                for (c, v) in eta.iter().enumerate() {
+                    check_value("stretch", *v, false)?;
+                    let _ = c;
+                }
+                for k in selected(sel, total, "skin point")? {
+                    for c in 0..3 {
+                        core.materials.eta[c][k] = eta[c];
+                    }
+                }
+            }
+            ParameterChange::Bending(sel, xi) => {
+                for v in xi {
+                    check_value("bending", *v, false)?;
+                }
+                for k in selected(sel, total, "skin point")? {
+                    for c in 0..3 {
+                        core.materials.xi[c][k] = xi[c];
+                    }
+                }
+                core.materials.has_bending =
+                    core.materials.xi.iter().any(|a| a.iter().any(|v| *v > 0.0));
+            }
+            ParameterChange::RestMetricScale(sel, s) => {
+                check_value("rest metric scale", *s, true)?;
+                for k in selected(sel, total, "skin point")? {
+                    for c in 0..3 {
+                        core.materials.rest_metric[c][k] *= s;
+                    }
+                }
+            }
+            ParameterChange::Mass(sel, kg) => {
+                check_value("mass", *kg, true)?;
+                for k in selected(sel, total, "skin point")? {
+                    if k >= core.around && k < core.around + free {
+                        let f = k - core.around;
+                        let mat = &mut core.materials;
+                        mat.mass_kg[f] = *kg;
+                        mat.inv_mass[f] = 1.0 / kg;
+                        mat.damping_per_mass[f] = mat.damping[f] / kg;
+                    }
+                }
+            }
+            ParameterChange::Damping(sel, d) => {
+                check_value("damping", *d, false)?;
+                for k in selected(sel, total, "skin point")? {
+                    if k >= core.around && k < core.around + free {
+                        let f = k - core.around;
+                        let mat = &mut core.materials;
+                        mat.damping[f] = *d;
+                        mat.damping_per_mass[f] = d / mat.mass_kg[f];
+                    }
+                }
+            }
+            ParameterChange::Fat(sel, fat) => {
+                check_value("fat", *fat, false)?;
+                for k in selected(sel, total, "skin point")? {
+                    if k >= core.around && k < core.around + free {
+                        core.materials.fat_m[k - core.around] = *fat;
+                    }
+                }
+                self.work.broad.invalidate();
+            }
+            ParameterChange::TissueStiffness(sel, ks) => {
+                check_value("tissue stiffness", *ks, false)?;
+                let ids = selected(sel, core.character.tissue.len(), "tissue spring")?;
+                for (q, src) in core.springs.source.iter().enumerate() {
+                    if ids.contains(&(*src as usize)) {
+                        core.springs.ks[q] = *ks;
+                    }
+                }
+            }
+            ParameterChange::TissueDamping(sel, kd) => {
+                check_value("tissue damping", *kd, false)?;
+                let ids = selected(sel, core.character.tissue.len(), "tissue spring")?;
+                for (q, src) in core.springs.source.iter().enumerate() {
+                    if ids.contains(&(*src as usize)) {
+                        core.springs.kd[q] = *kd;
+                    }
+                }
+            }
+            ParameterChange::Gravity(g) => {
+                if !g.is_finite() {
+                    return Err(SimError::BadParameter(format!("gravity {g} is not finite")));
+                }
+                core.materials.gravity = *g;
+            }
+            ParameterChange::Contact {
+                k_parallel,
+                k_perpendicular,
+            } => {
+                check_value("k_parallel", *k_parallel, false)?;
+                check_value("k_perpendicular", *k_perpendicular, false)?;
+                core.k_parallel = *k_parallel;
+                core.k_perpendicular = *k_perpendicular;
+            }
+            ParameterChange::ConstraintTolerance(eps) => {
+                check_value("epsilon_c", *eps, true)?;
+                core.epsilon_c_m = *eps;
+            }
+            ParameterChange::RecheckFraction(f) => {
+                if !crate::character::is_recheck_fraction(*f) {
+                    return Err(SimError::BadParameter(format!(
+                        "recheck_fraction {f} is not in (0, 1]"
+                    )));
+                }
+                core.recheck_fraction = *f;
+            }
+            ParameterChange::HoldContacts(on) => {
+                core.hold_contacts = *on;
+                // Takes effect from the next step: the holds of the current state go (or are
+                // made by the next pushes).
+                if !on {
+                    core.contacts.release_all();
+                }
+            }
+            ParameterChange::Integrator(kind) => {
+                core.kind = *kind;
+                core.step_s = initial_step(*kind, &core.tolerances);
+            }
+            ParameterChange::Tolerances(t) => {
+                let vals = [
+                    ("fixed_step_s", t.fixed_step_s),
+                    ("min_step_s", t.min_step_s),
+                    ("max_step_s", t.max_step_s),
+                    ("position_tolerance", t.position_tolerance),
+                    ("velocity_tolerance", t.velocity_tolerance),
+                    ("position_threshold_m", t.position_threshold_m),
+                    ("velocity_threshold_m_per_s", t.velocity_threshold_m_per_s),
+                    ("safety", t.safety),
+                    ("max_growth", t.max_growth),
+                    ("max_shrink", t.max_shrink),
+                ];
+                for (name, v) in vals {
+                    check_value(name, v as f32, true)?;
+                }
+                if t.max_step_s < t.min_step_s {
+                    return Err(SimError::BadParameter(format!(
+                        "max_step_s {} is below min_step_s {}",
+                        t.max_step_s, t.min_step_s
+                    )));
+                }
+                core.tolerances = *t;
+                core.step_s = initial_step(core.kind, t);
+            }
+        }
+        Ok(())
     }
 
     fn restore_checkpoint(&mut self) {
@@ -435,9 +591,7 @@ impl SurfaceModel {
             self.core
                 .contacts
                 .clone_from(&self.work.checkpoint_contacts);
-            self.work.checkpoint_current = true;
         } else {
-            self.work.checkpoint_current = false;
             // No checkpoint at this resolution: back to rest at the neutral posture.
             let rest = Core::rest_state(&self.core);
             self.core.x = rest;
@@ -557,7 +711,6 @@ impl SurfaceModel {
     fn commit(&mut self, h_s: f64) {
         let core = &mut self.core;
         let w = &mut self.work;
-        w.checkpoint_current = false;
         std::mem::swap(&mut core.x, &mut w.x_new);
         std::mem::swap(&mut core.v, &mut w.v_new);
         core.t_s += h_s;
@@ -844,8 +997,6 @@ impl DeformationModel for SurfaceModel {
         if bad_state {
             report.nonfinite_events += 1;
             self.restore_checkpoint();
-        } else if !self.work.checkpoint_current {
-            self.save_checkpoint();
         }
         self.ensure_start(poses);
         let min_step = self.core.tolerances.min_step_s;
@@ -980,159 +1131,11 @@ impl DeformationModel for SurfaceModel {
     }
 
     fn apply(&mut self, change: &ParameterChange) -> Result<(), SimError> {
-        // Whatever follows may change the state the checkpoint holds.
-        self.work.checkpoint_current = false;
-        let core = &mut self.core;
-        let free = core.free();
-        let total = core.around * core.along;
-        match change {
-            ParameterChange::Stretch(sel, eta) => {
-                for (c, v) in eta.iter().enumerate() {
-                    check_value("stretch", *v, false)?;
-                    let _ = c;
-                }
-                for k in selected(sel, total, "skin point")? {
-                    for c in 0..3 {
-                        core.materials.eta[c][k] = eta[c];
-                    }
-                }
-            }
-            ParameterChange::Bending(sel, xi) => {
-                for v in xi {
-                    check_value("bending", *v, false)?;
-                }
-                for k in selected(sel, total, "skin point")? {
-                    for c in 0..3 {
-                        core.materials.xi[c][k] = xi[c];
-                    }
-                }
-                core.materials.has_bending =
-                    core.materials.xi.iter().any(|a| a.iter().any(|v| *v > 0.0));
-            }
-            ParameterChange::RestMetricScale(sel, s) => {
-                check_value("rest metric scale", *s, true)?;
-                for k in selected(sel, total, "skin point")? {
-                    for c in 0..3 {
-                        core.materials.rest_metric[c][k] *= s;
-                    }
-                }
-            }
-            ParameterChange::Mass(sel, kg) => {
-                check_value("mass", *kg, true)?;
-                for k in selected(sel, total, "skin point")? {
-                    if k >= core.around && k < core.around + free {
-                        let f = k - core.around;
-                        let mat = &mut core.materials;
-                        mat.mass_kg[f] = *kg;
-                        mat.inv_mass[f] = 1.0 / kg;
-                        mat.damping_per_mass[f] = mat.damping[f] / kg;
-                    }
-                }
-            }
-            ParameterChange::Damping(sel, d) => {
-                check_value("damping", *d, false)?;
-                for k in selected(sel, total, "skin point")? {
-                    if k >= core.around && k < core.around + free {
-                        let f = k - core.around;
-                        let mat = &mut core.materials;
-                        mat.damping[f] = *d;
-                        mat.damping_per_mass[f] = d / mat.mass_kg[f];
-                    }
-                }
-            }
-            ParameterChange::Fat(sel, fat) => {
-                check_value("fat", *fat, false)?;
-                for k in selected(sel, total, "skin point")? {
-                    if k >= core.around && k < core.around + free {
-                        core.materials.fat_m[k - core.around] = *fat;
-                    }
-                }
-                self.work.broad.invalidate();
-            }
-            ParameterChange::TissueStiffness(sel, ks) => {
-                check_value("tissue stiffness", *ks, false)?;
-                let ids = selected(sel, core.character.tissue.len(), "tissue spring")?;
-                for (q, src) in core.springs.source.iter().enumerate() {
-                    if ids.contains(&(*src as usize)) {
-                        core.springs.ks[q] = *ks;
-                    }
-                }
-            }
-            ParameterChange::TissueDamping(sel, kd) => {
-                check_value("tissue damping", *kd, false)?;
-                let ids = selected(sel, core.character.tissue.len(), "tissue spring")?;
-                for (q, src) in core.springs.source.iter().enumerate() {
-                    if ids.contains(&(*src as usize)) {
-                        core.springs.kd[q] = *kd;
-                    }
-                }
-            }
-            ParameterChange::Gravity(g) => {
-                if !g.is_finite() {
-                    return Err(SimError::BadParameter(format!("gravity {g} is not finite")));
-                }
-                core.materials.gravity = *g;
-            }
-            ParameterChange::Contact {
-                k_parallel,
-                k_perpendicular,
-            } => {
-                check_value("k_parallel", *k_parallel, false)?;
-                check_value("k_perpendicular", *k_perpendicular, false)?;
-                core.k_parallel = *k_parallel;
-                core.k_perpendicular = *k_perpendicular;
-            }
-            ParameterChange::ConstraintTolerance(eps) => {
-                check_value("epsilon_c", *eps, true)?;
-                core.epsilon_c_m = *eps;
-            }
-            ParameterChange::RecheckFraction(f) => {
-                if !crate::character::is_recheck_fraction(*f) {
-                    return Err(SimError::BadParameter(format!(
-                        "recheck_fraction {f} is not in (0, 1]"
-                    )));
-                }
-                core.recheck_fraction = *f;
-            }
-            ParameterChange::HoldContacts(on) => {
-                core.hold_contacts = *on;
-                // Takes effect from the next step: the holds of the current state go (or are
-                // made by the next pushes).
-                if !on {
-                    core.contacts.release_all();
-                }
-            }
-            ParameterChange::Integrator(kind) => {
-                core.kind = *kind;
-                core.step_s = initial_step(*kind, &core.tolerances);
-            }
-            ParameterChange::Tolerances(t) => {
-                let vals = [
-                    ("fixed_step_s", t.fixed_step_s),
-                    ("min_step_s", t.min_step_s),
-                    ("max_step_s", t.max_step_s),
-                    ("position_tolerance", t.position_tolerance),
-                    ("velocity_tolerance", t.velocity_tolerance),
-                    ("position_threshold_m", t.position_threshold_m),
-                    ("velocity_threshold_m_per_s", t.velocity_threshold_m_per_s),
-                    ("safety", t.safety),
-                    ("max_growth", t.max_growth),
-                    ("max_shrink", t.max_shrink),
-                ];
-                for (name, v) in vals {
-                    check_value(name, v as f32, true)?;
-                }
-                if t.max_step_s < t.min_step_s {
-                    return Err(SimError::BadParameter(format!(
-                        "max_step_s {} is below min_step_s {}",
-                        t.max_step_s, t.min_step_s
-                    )));
-                }
-                core.tolerances = *t;
-                core.step_s = initial_step(core.kind, t);
-            }
-        }
-        Ok(())
+        let applied = self.apply_change(change);
+        // Some changes touch the state (a new integrator's step, holds released); a refused
+        // one changed nothing.
+        self.save_checkpoint();
+        applied
     }
 
     fn snapshot(&self) -> Snapshot {
@@ -1140,8 +1143,6 @@ impl DeformationModel for SurfaceModel {
     }
 
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError> {
-        // Whatever follows may change the state the checkpoint holds.
-        self.work.checkpoint_current = false;
         if snapshot.model != MODEL_NAME {
             return Err(SimError::BadSnapshot(format!(
                 "made by the {} model, not the {MODEL_NAME} model",
@@ -1175,8 +1176,6 @@ impl DeformationModel for SurfaceModel {
     }
 
     fn set_resolution(&mut self, around: u32, along: u32) -> Result<(), SimError> {
-        // Whatever follows may change the state the checkpoint holds.
-        self.work.checkpoint_current = false;
         if !(3..=1024).contains(&around) || !(3..=1024).contains(&along) {
             return Err(SimError::BadResolution {
                 around,
