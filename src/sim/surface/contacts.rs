@@ -137,11 +137,20 @@ pub(super) struct PhaseEnd<'a> {
     pub pushes: Pushes<'a>,
     /// The shapes of the phase (at the end of its step).
     pub shapes: &'a [ShapeInstance],
-    /// Per free point, non-zero where the phase's full pass pushed the point (read with holding
-    /// off only).
-    pub first_pushed: &'a [u8],
-    /// The world direction of that push (the later passes overwrite the last push's).
-    pub first_normal: &'a [Vec<f32>; 3],
+    /// With holding off: per free point, non-zero where the phase's full pass pushed the
+    /// point, and the world direction of that push (the later passes overwrite the last
+    /// push's). Not needed with holding on.
+    pub first: Option<(&'a [u8], &'a [Vec<f32>; 3])>,
+}
+
+/// The three components of a SoA vector as slices.
+fn parts(a: &[Vec<f32>; 3]) -> [&[f32]; 3] {
+    a.each_ref().map(Vec::as_slice)
+}
+
+/// [`parts`], mutable.
+fn parts_mut(a: &mut [Vec<f32>; 3]) -> [&mut [f32]; 3] {
+    a.each_mut().map(Vec::as_mut_slice)
 }
 
 /// Scratch of [`ContactState::update`].
@@ -239,14 +248,38 @@ impl ContactState {
         let free = end.pushed.len();
         let p = &end.pushes;
         let sized = |a: &[Vec<f32>; 3]| a.iter().all(|c| c.len() >= free);
+        let first_ok = end
+            .first
+            .is_none_or(|(mask, normal)| mask.len() >= free && sized(normal));
         let inputs_ok = [p.normal, p.surface_shape, p.normal_shape, p.fat_points]
             .into_iter()
-            .chain([end.first_normal])
             .all(sized)
             && p.shape.len() >= free
-            && end.first_pushed.len() >= free;
+            && first_ok;
         if !inputs_ok {
             self.clear(free);
+            return;
+        }
+        self.shape.resize(free, NONE);
+        self.age.resize(free, 0);
+        for a in self.vectors_mut() {
+            a.resize(free, 0.0);
+        }
+        if !holding {
+            // The projection alone: the contacts are this phase's pushes, nothing is held (the
+            // hold arrays are not read while `held` is 0), and the contact points in the shapes'
+            // frames are not needed.
+            self.held = 0;
+            self.firsts = projection_pass(
+                end.pushed,
+                p.shape,
+                parts(p.normal),
+                end.first.map(|(mask, normal)| (mask, parts(normal))),
+                &mut self.shape,
+                &mut self.age,
+                parts_mut(&mut self.absorb),
+                parts_mut(&mut self.absorb_first),
+            );
             return;
         }
         let empty;
@@ -258,96 +291,26 @@ impl ContactState {
             empty = e;
             &empty
         };
-        old.check_holds(end, holding, scratch);
-        self.shape.resize(free, NONE);
-        self.age.resize(free, 0);
-        for a in self.vectors_mut() {
-            a.resize(free, 0.0);
-        }
-        let Self {
-            shape,
-            age,
-            surface_shape: [s0, s1, s2],
-            normal_shape: [m0, m1, m2],
-            hold: [h0, h1, h2],
-            absorb: [a0, a1, a2],
-            absorb_first: [f0, f1, f2],
-            held,
-            firsts,
-        } = self;
-        let ([l0, l1, l2], [ps0, ps1, ps2], [pn0, pn1, pn2]) =
-            (p.normal, p.surface_shape, p.normal_shape);
-        let [w0, w1, w2] = &scratch.normal;
-        let [fn0, fn1, fn2] = end.first_normal;
-        if !holding {
-            // The projection alone: the contacts are this phase's pushes, nothing is held (the
-            // hold arrays are not read while `held` is 0), and the contact points in the shapes'
-            // frames are not needed; half the arrays of the pass below.
-            *held = 0;
-            *firsts = projection_pass(
-                end.pushed,
-                p.shape,
-                l0,
-                l1,
-                l2,
-                end.first_pushed,
-                fn0,
-                fn1,
-                fn2,
-                shape,
-                age,
-                a0,
-                a1,
-                a2,
-                f0,
-                f1,
-                f2,
-            );
-            return;
-        }
-        let [os0, os1, os2] = &old.surface_shape;
-        let [on0, on1, on2] = &old.normal_shape;
+        old.check_holds(end, scratch);
         // Holding: no full-pass directions (`absorb_first` is not read while `firsts` is 0).
-        *firsts = 0;
-        *held = update_pass(
-            end.pushed,
+        self.firsts = 0;
+        self.held = update_pass(
+            (end.pushed, &scratch.check, &scratch.kept),
             p.shape,
-            l0,
-            l1,
-            l2,
-            ps0,
-            ps1,
-            ps2,
-            pn0,
-            pn1,
-            pn2,
-            &scratch.check,
-            &scratch.kept,
-            w0,
-            w1,
-            w2,
-            &old.shape,
-            &old.age,
-            os0,
-            os1,
-            os2,
-            on0,
-            on1,
-            on2,
-            shape,
-            age,
-            s0,
-            s1,
-            s2,
-            m0,
-            m1,
-            m2,
-            h0,
-            h1,
-            h2,
-            a0,
-            a1,
-            a2,
+            [
+                parts(p.normal),
+                parts(p.surface_shape),
+                parts(p.normal_shape),
+            ],
+            parts(&scratch.normal),
+            (&old.shape, &old.age),
+            [parts(&old.surface_shape), parts(&old.normal_shape)],
+            (&mut self.shape, &mut self.age),
+            [
+                parts_mut(&mut self.surface_shape),
+                parts_mut(&mut self.normal_shape),
+            ],
+            [parts_mut(&mut self.hold), parts_mut(&mut self.absorb)],
         );
     }
 
@@ -355,11 +318,11 @@ impl ContactState {
     /// push again, one by one (each maps its fat point into its own shape's frame): into
     /// `scratch`, per free point, whether it was checked, whether its hold is kept, and its
     /// contact's world normal.
-    fn check_holds(&self, end: &PhaseEnd<'_>, holding: bool, scratch: &mut UpdateScratch) {
+    fn check_holds(&self, end: &PhaseEnd<'_>, scratch: &mut UpdateScratch) {
         let free = end.pushed.len();
         // A state that holds nothing may keep old hold normals from before holding was switched
         // off (they are not read while `held` is 0).
-        let holding = holding && self.held > 0;
+        let holding = self.held > 0;
         let [h0, h1, h2] = &self.hold;
         let (h0, h1, h2, pushed) = (&h0[..free], &h1[..free], &h2[..free], &end.pushed[..free]);
         scratch.check.resize(free, 0);
@@ -435,69 +398,40 @@ impl ContactState {
     }
 }
 
+/// Per free point: whether a pass of the phase pushed it, whether its hold was checked, and
+/// whether the check kept it (`kept` is valid only where `check` is set), each 0 or 1.
+type Flags<'a> = (&'a [u8], &'a [u8], &'a [u8]);
+
 crate::sim::simd::multiversion! {
-    /// [`ContactState::update`] with holding on, for every free point at once, branch-free
-    /// (selects only), so the loop vectorises; returns how many points it holds. Per point: a push of this phase makes a new contact from the push's record
-    /// (`l*` its world direction, `ps*`/`pn*` its landing point and direction in the pushing
-    /// shape's frame); a checked hold (`check`) is kept, one step older, where the check kept
-    /// it (`kept`, with its world normal `w*`), and is released otherwise, keeping its normal
-    /// for one step of the error estimate. Every slice is its own argument, so the compiler
-    /// knows they do not overlap.
+    /// [`ContactState::update`] with holding on, for every free point at once, with selects
+    /// only so the loops vectorise; returns how many points it holds. Per point: a push of
+    /// this phase makes a new contact from the push's record (`push_shape`, and `push`: its
+    /// world direction, its landing point and its direction in the pushing shape's frame); a
+    /// checked hold is kept, one step older, where the check kept it (with the world normal
+    /// the check found, `check_normal`), and is released otherwise, keeping its normal for one
+    /// step of the error estimate. `old` are the contacts' shapes and ages and (`old_contact`)
+    /// their points and normals in their shapes' frames; `out` and `contact` (points, normals)
+    /// and `normals` (hold, absorb) are the new state's arrays.
     fn update_pass(
-        pushed: &[u8],
+        flags: Flags<'_>,
         push_shape: &[u32],
-        l0: &[f32],
-        l1: &[f32],
-        l2: &[f32],
-        ps0: &[f32],
-        ps1: &[f32],
-        ps2: &[f32],
-        pn0: &[f32],
-        pn1: &[f32],
-        pn2: &[f32],
-        check: &[u8],
-        kept: &[u8],
-        w0: &[f32],
-        w1: &[f32],
-        w2: &[f32],
-        old_shape: &[u32],
-        old_age: &[u8],
-        os0: &[f32],
-        os1: &[f32],
-        os2: &[f32],
-        on0: &[f32],
-        on1: &[f32],
-        on2: &[f32],
-        shape: &mut [u32],
-        age: &mut [u8],
-        s0: &mut [f32],
-        s1: &mut [f32],
-        s2: &mut [f32],
-        m0: &mut [f32],
-        m1: &mut [f32],
-        m2: &mut [f32],
-        h0: &mut [f32],
-        h1: &mut [f32],
-        h2: &mut [f32],
-        a0: &mut [f32],
-        a1: &mut [f32],
-        a2: &mut [f32],
+        push: [[&[f32]; 3]; 3],
+        check_normal: [&[f32]; 3],
+        old: (&[u32], &[u8]),
+        old_contact: [[&[f32]; 3]; 2],
+        out: (&mut [u32], &mut [u8]),
+        contact: [[&mut [f32]; 3]; 2],
+        normals: [[&mut [f32]; 3]; 2],
     ) -> usize {
-        let n = pushed.len().min(shape.len());
-        let (pushed, push_shape) = (&pushed[..n], &push_shape[..n]);
-        let (check, kept) = (&check[..n], &kept[..n]);
-        let (l0, l1, l2) = (&l0[..n], &l1[..n], &l2[..n]);
-        let (ps0, ps1, ps2) = (&ps0[..n], &ps1[..n], &ps2[..n]);
-        let (pn0, pn1, pn2) = (&pn0[..n], &pn1[..n], &pn2[..n]);
-        let (w0, w1, w2) = (&w0[..n], &w1[..n], &w2[..n]);
+        let (pushed, check, kept) = flags;
+        let ((old_shape, old_age), (shape, age)) = (old, out);
+        let n = (pushed.len().min(check.len()).min(kept.len()))
+            .min(push_shape.len().min(old_shape.len()).min(old_age.len()))
+            .min(shape.len().min(age.len()));
+        let (pushed, check, kept, push_shape) =
+            (&pushed[..n], &check[..n], &kept[..n], &push_shape[..n]);
         let (old_shape, old_age) = (&old_shape[..n], &old_age[..n]);
-        let (os0, os1, os2) = (&os0[..n], &os1[..n], &os2[..n]);
-        let (on0, on1, on2) = (&on0[..n], &on1[..n], &on2[..n]);
         let (shape, age) = (&mut shape[..n], &mut age[..n]);
-        let (s0, s1, s2) = (&mut s0[..n], &mut s1[..n], &mut s2[..n]);
-        let (m0, m1, m2) = (&mut m0[..n], &mut m1[..n], &mut m2[..n]);
-        let (h0, h1, h2) = (&mut h0[..n], &mut h1[..n], &mut h2[..n]);
-        let (a0, a1, a2) = (&mut a0[..n], &mut a1[..n], &mut a2[..n]);
         // Short loops over arrays of one element width each: as one loop over all of them the
         // compiler left it scalar (about 70 instructions a point, 4.6 % of the torso's
         // instructions).
@@ -512,23 +446,25 @@ crate::sim::simd::multiversion! {
             shape[f] = if p { push_shape[f] } else { kept_shape };
             held_count += u32::from(p | keep);
         }
-        pick_contacts(pushed, check, kept, [ps0, ps1, ps2], [os0, os1, os2], [s0, s1, s2]);
-        pick_contacts(pushed, check, kept, [pn0, pn1, pn2], [on0, on1, on2], [m0, m1, m2]);
-        // A released point (checked, not kept) keeps its normal for the error estimate.
+        let [push_normal, push_surface, push_local_normal] = push;
+        let [old_surface, old_normal] = old_contact;
+        let [surface, normal] = contact;
+        let [hold, absorb] = normals;
         let flags = (pushed, check, kept);
-        contact_normals(flags, false, [l0, l1, l2], [w0, w1, w2], [a0, a1, a2]);
-        contact_normals(flags, true, [l0, l1, l2], [w0, w1, w2], [h0, h1, h2]);
+        pick_contacts(flags, push_surface, old_surface, surface);
+        pick_contacts(flags, push_local_normal, old_normal, normal);
+        // A released point (checked, not kept) keeps its normal for the error estimate.
+        contact_normals(flags, false, push_normal, check_normal, absorb);
+        contact_normals(flags, true, push_normal, check_normal, hold);
         held_count as usize
     }
 }
 
-/// `out = new` where the point was pushed, `old` where its hold was kept (`check` and `kept`),
-/// zero elsewhere, per component: a part of [`update_pass`] (inlined into each of its copies).
+/// `out = new` where the point was pushed, `old` where its hold was kept, zero elsewhere, per
+/// component: a part of [`update_pass`] (inlined into each of its copies).
 #[inline(always)]
 fn pick_contacts(
-    pushed: &[u8],
-    check: &[u8],
-    kept: &[u8],
+    (pushed, check, kept): Flags<'_>,
     new: [&[f32]; 3],
     old: [&[f32]; 3],
     out: [&mut [f32]; 3],
@@ -552,7 +488,7 @@ fn pick_contacts(
 /// [`update_pass`] (inlined into each of its copies).
 #[inline(always)]
 fn contact_normals(
-    (pushed, check, kept): (&[u8], &[u8], &[u8]),
+    (pushed, check, kept): Flags<'_>,
     holds: bool,
     pushes: [&[f32]; 3],
     checks: [&[f32]; 3],
@@ -585,51 +521,56 @@ fn contact_normals(
 
 crate::sim::simd::multiversion! {
     /// [`ContactState::update`] with holding off, for every free point at once: a point the
-    /// phase pushed (`pushed`) gets its push's shape and world direction (`l*`) and, where the
-    /// full pass pushed it (`first_pushed`), that push's direction (`fn*`); every other point
-    /// gets none. Returns how many points got a full-pass direction. Every slice is its own
-    /// argument, so the compiler knows they do not overlap.
+    /// phase pushed (`pushed`) gets its push's shape and world direction (`push_normal`) in
+    /// `absorb`, and, where `first` says the full pass pushed it, that push's direction in
+    /// `absorb_first`; every other point gets none. Returns how many points got a full-pass
+    /// direction (0 without `first`, when `absorb_first` is left as it is).
     fn projection_pass(
         pushed: &[u8],
         push_shape: &[u32],
-        l0: &[f32],
-        l1: &[f32],
-        l2: &[f32],
-        first_pushed: &[u8],
-        fn0: &[f32],
-        fn1: &[f32],
-        fn2: &[f32],
+        push_normal: [&[f32]; 3],
+        first: Option<(&[u8], [&[f32]; 3])>,
         shape: &mut [u32],
         age: &mut [u8],
-        a0: &mut [f32],
-        a1: &mut [f32],
-        a2: &mut [f32],
-        f0: &mut [f32],
-        f1: &mut [f32],
-        f2: &mut [f32],
+        absorb: [&mut [f32]; 3],
+        absorb_first: [&mut [f32]; 3],
     ) -> usize {
-        let n = pushed.len().min(shape.len());
-        let (pushed, push_shape, first_pushed) = (&pushed[..n], &push_shape[..n], &first_pushed[..n]);
-        let (l0, l1, l2) = (&l0[..n], &l1[..n], &l2[..n]);
-        let (fn0, fn1, fn2) = (&fn0[..n], &fn1[..n], &fn2[..n]);
+        let n = pushed.len().min(push_shape.len()).min(shape.len()).min(age.len());
+        let (pushed, push_shape) = (&pushed[..n], &push_shape[..n]);
         let (shape, age) = (&mut shape[..n], &mut age[..n]);
-        let (a0, a1, a2) = (&mut a0[..n], &mut a1[..n], &mut a2[..n]);
-        let (f0, f1, f2) = (&mut f0[..n], &mut f1[..n], &mut f2[..n]);
+        for f in 0..n {
+            shape[f] = if pushed[f] != 0 { push_shape[f] } else { NONE };
+            age[f] = 0;
+        }
+        masked_copy(pushed, pushed, push_normal, absorb);
+        let Some((first_pushed, first_normal)) = first else {
+            return 0;
+        };
+        masked_copy(pushed, first_pushed, first_normal, absorb_first);
+        let n = n.min(first_pushed.len());
+        let (pushed, first_pushed) = (&pushed[..n], &first_pushed[..n]);
         let mut first_count = 0u32;
         for f in 0..n {
-            let p = pushed[f] != 0;
-            let first = p & (first_pushed[f] != 0);
-            shape[f] = if p { push_shape[f] } else { NONE };
-            age[f] = 0;
-            a0[f] = if p { l0[f] } else { 0.0 };
-            a1[f] = if p { l1[f] } else { 0.0 };
-            a2[f] = if p { l2[f] } else { 0.0 };
-            f0[f] = if first { fn0[f] } else { 0.0 };
-            f1[f] = if first { fn1[f] } else { 0.0 };
-            f2[f] = if first { fn2[f] } else { 0.0 };
-            first_count += u32::from(first);
+            first_count += u32::from((pushed[f] != 0) & (first_pushed[f] != 0));
         }
         first_count as usize
+    }
+}
+
+/// Per component, `out = from` where both masks are set, zero elsewhere: a part of
+/// [`projection_pass`] (inlined into each of its copies).
+#[inline(always)]
+fn masked_copy(a: &[u8], b: &[u8], from: [&[f32]; 3], out: [&mut [f32]; 3]) {
+    for (from, out) in from.into_iter().zip(out) {
+        let n = out.len().min(from.len()).min(a.len()).min(b.len());
+        let (from, out, a, b) = (&from[..n], &mut out[..n], &a[..n], &b[..n]);
+        for f in 0..n {
+            out[f] = if (a[f] != 0) & (b[f] != 0) {
+                from[f]
+            } else {
+                0.0
+            };
+        }
     }
 }
 
@@ -775,8 +716,8 @@ mod tests {
                     fat_points: &fat,
                 },
                 shapes,
-                first_pushed: &first_pushed,
-                first_normal: &first,
+                // As the model passes them: with holding off only.
+                first: (!holding).then_some((&first_pushed, &first)),
             },
             holding,
             &mut UpdateScratch::default(),

@@ -128,7 +128,7 @@ struct Work {
     /// Scratch of [`ContactState::update`].
     contact_scratch: UpdateScratch,
     /// Per free point, 1 where the current candidate's full pass pushed it, with the direction
-    /// (world, SoA; see [`PhaseEnd::first_normal`]).
+    /// (world, SoA; see [`PhaseEnd::first`]), with holding off.
     first_mask: Vec<u8>,
     first_normal: [Vec<f32>; 3],
 }
@@ -1316,11 +1316,6 @@ fn constrain_candidate(
         for (first, last) in w.first_normal.iter_mut().zip(w.broad.pushes().normal) {
             first.clone_from(last);
         }
-    } else {
-        w.first_mask.resize(free, 0);
-        for c in &mut w.first_normal {
-            c.resize(free, 0.0);
-        }
     }
     let (mut passes, mut rechecked_points) = (0, 0);
     // Corrections no longer than the re-check threshold do not warrant another pass.
@@ -1375,8 +1370,7 @@ fn constrain_candidate(
             pushed: &w.contact_mask,
             pushes: w.broad.pushes(),
             shapes: shapes_end,
-            first_pushed: &w.first_mask,
-            first_normal: &w.first_normal,
+            first: (!core.hold_contacts).then_some((&w.first_mask, &w.first_normal)),
         },
         core.hold_contacts,
         &mut w.contact_scratch,
