@@ -343,6 +343,11 @@ impl Resolved {
     }
 
     /// A radius that contains the image of the ball of radius `r` about the origin.
+    ///
+    /// The bend's `√2`: a rest point `(x, y)` goes to `|P|² = x² + 4 (1 − kx) sin²(ky/2) / k²
+    /// ≤ x² + (1 − kx) min(y², 4/k²)`, which is at most `x² + 2y²` for every curvature (with
+    /// `c = −kx > 1` the excess over `2y²` is at most `(c − 1)·4/k² ≤ c²/k² = x²`, as
+    /// `(c − 2)² ≥ 0`).
     pub(crate) fn bound(&self, r: f32) -> f32 {
         match *self {
             Resolved::Taper { rate_per_m } => r * (1.0 + rate_per_m.abs() * r).max(1.0),
@@ -616,35 +621,99 @@ impl ShapeGeometry {
     /// A conservative half-extent box of the deformed shape in its own frame (every shape point
     /// `p` has `|p_i| ≤ extent_i`), metres.
     pub fn extent_m(&self) -> Vec3 {
-        let mut e = match self.primitive {
+        self.deformations()
+            .iter()
+            .fold(self.primitive_box(), Self::deformed_box)
+    }
+
+    /// The undeformed primitive's half-extent box, metres.
+    fn primitive_box(&self) -> Vec3 {
+        match self.primitive {
             Primitive::Sphere { radius_m } => Vec3::splat(radius_m),
             Primitive::Superellipsoid { radii_m, .. } => radii_m,
             Primitive::Cylinder {
                 radius_m,
                 half_length_m,
             } => Vec3::new(radius_m, half_length_m, radius_m),
+        }
+    }
+
+    /// The half-extent box containing the image of the box `e` under `d`.
+    fn deformed_box(e: Vec3, d: &Resolved) -> Vec3 {
+        match *d {
+            Resolved::Taper { rate_per_m } => {
+                let scale = (1.0 + rate_per_m.abs() * e.y).max(1.0);
+                Vec3::new(e.x * scale, e.y, e.z * scale)
+            }
+            Resolved::Twist { .. } => {
+                let rho = (e.x * e.x + e.z * e.z).sqrt();
+                Vec3::new(rho, e.y, rho)
+            }
+            Resolved::Bend { curvature_per_m } => {
+                if curvature_per_m.abs() < MIN_CURVATURE_PER_M {
+                    e
+                } else {
+                    // The bend maps the xy disc of radius r into that of radius √2·r
+                    // (`Resolved::bound`); z is unchanged.
+                    let r = (e.x * e.x + e.y * e.y).sqrt() * std::f32::consts::SQRT_2;
+                    Vec3::new(r, r, e.z)
+                }
+            }
+        }
+    }
+
+    /// Semi-axes `E` of a conservative axis-aligned ellipsoid about the origin of the shape's
+    /// own frame: every point `p` of the deformed shape has `Σ (p_i / E_i)² ≤ 1`, metres. An
+    /// axis may be unbounded (`f32::INFINITY`, its term 0): a cylinder's ellipsoid is the
+    /// infinite one around its axis. Together with [`Self::extent_m`]'s box it cuts off the
+    /// box's corners, where the constraint pass would otherwise evaluate points that cannot be
+    /// inside.
+    ///
+    /// - Superellipsoid, in coordinates `x̂ = x/a` etc.: `w = ‖(x̂, ẑ)‖_(2/e2)` and
+    ///   `‖(w, ŷ)‖_(2/e1) ≤ 1`. For `p ≥ 2`, `‖v‖₂² ≤ 2^(1 − 2/p) ‖v‖_p²` in two dimensions (and
+    ///   `‖v‖₂ ≤ ‖v‖_p` for `p < 2`), so `x̂² + ẑ² ≤ A w²` and `w² + ŷ² ≤ B` with
+    ///   `A = 2^max(0, 1 − e2)`, `B = 2^max(0, 1 − e1)`: every axis scales by `√(AB)` (1 for an
+    ///   ellipsoid).
+    /// - Taper (x and z scaled by `1 + t y`, `|y| ≤` the box's y): x and z scale by the largest
+    ///   factor, as in the box.
+    /// - Twist (x and z turned about y): a turn keeps `x² + z²`, so both take the larger axis.
+    /// - Bend (in the xy plane, z kept): a rest point `(x, y)` goes to distance `|P|` with
+    ///   `|P|² = x² + (4R/k) sin²(ky/2)`, `R = 1/k − x`, so `|P|² ≤ x² + (1 − kx) y² ≤
+    ///   (1 + |k| X)(x² + y²)` with `X ≥ |x|` (the box's x), and also `|P|² ≤ 2(x² + y²)`
+    ///   (the bend in `Resolved::bound`); each z slice's disc grows by the smaller factor, and
+    ///   x and y both take the larger axis times that.
+    pub fn bounding_ellipsoid_m(&self) -> Vec3 {
+        let mut e = match self.primitive {
+            Primitive::Sphere { radius_m } => Vec3::splat(radius_m),
+            Primitive::Superellipsoid { radii_m, e1, e2 } => {
+                let exponent = (1.0 - e1).max(0.0) + (1.0 - e2).max(0.0);
+                radii_m * (0.5 * exponent).exp2()
+            }
+            Primitive::Cylinder { radius_m, .. } => Vec3::new(radius_m, f32::INFINITY, radius_m),
         };
+        // The box before each deformation, for the bounds the ellipsoid steps need.
+        let mut bx = self.primitive_box();
         for d in self.deformations() {
             e = match *d {
                 Resolved::Taper { rate_per_m } => {
-                    let scale = (1.0 + rate_per_m.abs() * e.y).max(1.0);
+                    let scale = (1.0 + rate_per_m.abs() * bx.y).max(1.0);
                     Vec3::new(e.x * scale, e.y, e.z * scale)
                 }
                 Resolved::Twist { .. } => {
-                    let rho = (e.x * e.x + e.z * e.z).sqrt();
-                    Vec3::new(rho, e.y, rho)
+                    let r = e.x.max(e.z);
+                    Vec3::new(r, e.y, r)
                 }
                 Resolved::Bend { curvature_per_m } => {
                     if curvature_per_m.abs() < MIN_CURVATURE_PER_M {
                         e
                     } else {
-                        // The bend maps the xy disc of radius r into that of radius √2·r
-                        // (`Resolved::bound`); z is unchanged.
-                        let r = (e.x * e.x + e.y * e.y).sqrt() * std::f32::consts::SQRT_2;
+                        let grow = (1.0 + curvature_per_m.abs() * bx.x).min(2.0).sqrt();
+                        let r = e.x.max(e.y) * grow;
                         Vec3::new(r, r, e.z)
                     }
                 }
             };
+            bx = Self::deformed_box(bx, d);
         }
         e
     }
@@ -1060,6 +1129,78 @@ mod tests {
             for p in samples() {
                 let surf = g.deform(g.primitive.radial_projection(p));
                 assert!(surf.length() <= r * 1.0001, "{name}: {surf} outside {r}");
+            }
+        }
+    }
+
+    #[test]
+    fn bounding_ellipsoids_contain_the_shapes_and_cut_the_box_corners() {
+        // The last two are boxy: their ellipsoid cannot cut the box's corners.
+        let exponents = [(0.6, 0.9), (0.9, 1.0), (1.0, 1.0), (2.0, 0.3), (0.1, 0.1)];
+        let mut all = geometries();
+        for (i, (e1, e2)) in exponents.into_iter().enumerate() {
+            let se = Primitive::Superellipsoid {
+                radii_m: Vec3::new(0.06, 0.11, 0.08),
+                e1,
+                e2,
+            };
+            let bend = Resolved::Bend {
+                curvature_per_m: -6.0,
+            };
+            let names = if i < 3 {
+                ["superellipsoid", "bent superellipsoid"]
+            } else {
+                ["boxy superellipsoid", "boxy bent superellipsoid"]
+            };
+            all.push((names[0], ShapeGeometry::new(se, &[])));
+            all.push((names[1], ShapeGeometry::new(se, &[bend])));
+        }
+        for (name, g) in all {
+            let e = g.bounding_ellipsoid_m();
+            let measure = |p: Vec3| (p / e).length_squared();
+            let mut worst = 0.0f32;
+            for p in samples() {
+                let surf = g.primitive.radial_projection(p);
+                for t in [1.0, 0.8, 0.5] {
+                    worst = worst.max(measure(g.deform(surf * t)));
+                }
+            }
+            assert!(worst <= 1.0001, "{name}: a shape point at {worst} > 1");
+            // The bound is of use: the box's corner is outside it (an ellipsoid's inscribed
+            // box has its corners at 1/√3 of the axes), except for boxy shapes and where it
+            // bounds one axis only (a bent cylinder).
+            let bounded = e.to_array().iter().filter(|a| a.is_finite()).count();
+            let corner = g.extent_m() * 0.9;
+            let useful = bounded < 2 || name.starts_with("boxy") || measure(corner) > 1.0;
+            assert!(useful, "{name}: the box corner is inside");
+        }
+    }
+
+    /// Bends whose curvature times the shape's reach across them is above 1, where the side
+    /// away from the centre of curvature stretches most (`1 − kx > 2`).
+    #[test]
+    fn strong_bends_stay_inside_their_box_sphere_and_ellipsoid() {
+        let se = Primitive::Superellipsoid {
+            radii_m: Vec3::new(0.3, 0.25, 0.1),
+            e1: 1.0,
+            e2: 1.0,
+        };
+        for k in [4.0, -4.0, 3.0, 30.0, -30.0] {
+            let g = ShapeGeometry::new(se, &[Resolved::Bend { curvature_per_m: k }]);
+            let (bx, r, e) = (g.extent_m(), g.bound_radius_m(), g.bounding_ellipsoid_m());
+            for p in samples() {
+                let rest = g.primitive.radial_projection(p);
+                if 1.0 - k * rest.x <= 0.0 {
+                    continue; // beyond the centre of curvature: outside the valid domain
+                }
+                let q = g.deform(rest);
+                let tag = format!("k = {k}: {rest} -> {q}");
+                assert!(
+                    (q.abs() - bx * 1.0001).max_element() <= 0.0,
+                    "{tag} outside {bx}"
+                );
+                assert!(q.length() <= r * 1.0001, "{tag} outside {r}");
+                assert!((q / e).length_squared() <= 1.0001, "{tag} outside {e}");
             }
         }
     }

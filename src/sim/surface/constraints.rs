@@ -52,6 +52,9 @@ const SETTLED_M: f32 = PROJECTION_TOLERANCE_M;
 /// 128×128 skin a whole row (the old gap) made the first stage test about 155k points per
 /// pass for 28k hits; 16 or 32 points cost 3.6 % fewer instructions in all, 64 points 2.6 %.
 const RUN_GAP: usize = 32;
+/// Relative widening of each shape's bounding ellipsoid in the first stage's filter, so that
+/// rounding in the mapping to the shape frame cannot drop a point of the shape.
+const ELLIPSOID_SLACK: f32 = 1e-3;
 /// Batched Newton steps before the scalar projection takes over.
 const NEWTON_STEPS: usize = 2;
 
@@ -67,6 +70,9 @@ pub struct Broadphase {
     ref_extents: Vec<Vec3>,
     /// Each shape's extent this pass.
     extents: Vec<Vec3>,
+    /// Each shape's bounding ellipsoid this pass as `1/E²` per axis
+    /// ([`ShapeGeometry::bounding_ellipsoid_m`], widened by [`ELLIPSOID_SLACK`]).
+    ellipsoids: Vec<Vec3>,
     moved_m: f32,
     valid: bool,
     scratch: PassScratch,
@@ -243,6 +249,16 @@ impl Broadphase {
         self.extents.clear();
         self.extents
             .extend(shapes.iter().map(|s| s.geometry.extent_m()));
+        self.ellipsoids.clear();
+        self.ellipsoids
+            .extend(shapes.iter().map(|s| match s.geometry.primitive {
+                // The sphere stage's test is exact and needs no bound.
+                Primitive::Sphere { .. } if s.geometry.is_undeformed() => Vec3::ZERO,
+                _ => {
+                    let e = s.geometry.bounding_ellipsoid_m() * (1.0 + ELLIPSOID_SLACK);
+                    Vec3::ONE / (e * e)
+                }
+            }));
         let mut shape_moved = 0.0f32;
         if self.ref_frames.len() == shapes.len() {
             for (k, s) in shapes.iter().enumerate() {
@@ -351,7 +367,16 @@ impl Broadphase {
                 let (ones, hit) = (&sc.ones[a..b], &mut sc.hit[..len]);
                 match sphere_reach {
                     Some(r) => sphere_filter(center, r * r, gx, gy, gz, ones, hit),
-                    None => box_filter(&s.shape_from_world, reach, gx, gy, gz, ones, hit),
+                    // The grown reach is a box only (an ellipsoid's neighbourhood is not an
+                    // ellipsoid): no ellipsoid weights.
+                    None => box_filter(
+                        &s.shape_from_world,
+                        reach,
+                        Vec3::ZERO,
+                        [gx, gy, gz],
+                        ones,
+                        hit,
+                    ),
                 }
                 sc.hit[len..].fill(0);
                 collect_hits(&sc.hit, &mut sc.hit_index);
@@ -483,7 +508,10 @@ pub fn enforce(
                     Primitive::Sphere { radius_m } if s.geometry.is_undeformed() => {
                         sphere_stage(sc, runs, s, owed, motion, radius_m)
                     }
-                    _ => general_stage(sc, runs, s, owed, motion, broad.extents[s_idx]),
+                    _ => {
+                        let bound = (broad.extents[s_idx], broad.ellipsoids[s_idx]);
+                        general_stage(sc, runs, s, owed, motion, bound)
+                    }
                 };
             }
             sc.active_runs = active;
@@ -974,7 +1002,7 @@ fn general_stage(
     s: &ShapeInstance,
     owed: Owed,
     motion: SurfaceMotion<'_>,
-    extent: Vec3,
+    (extent, ellipsoid): (Vec3, Vec3),
 ) -> usize {
     let t = &s.shape_from_world;
     sc.batch.clear();
@@ -983,6 +1011,7 @@ fn general_stage(
         let filter = Filter::Box {
             shape_from_world: t,
             extent,
+            ellipsoid,
         };
         filter_run(sc, a, b, filter, owed);
         sc.batch.extend_mapped(a, &sc.hit_index, &sc.points.q, t);
@@ -1070,10 +1099,12 @@ const SPARSE_RATIO: usize = 6;
 enum Filter<'a> {
     /// Strictly inside an undeformed sphere (`|q − center|² < r2`).
     Sphere { center: Vec3, r2: f32 },
-    /// Inside a shape's extent box in its own frame.
+    /// Inside a shape's extent box and its bounding ellipsoid (`Σ p_i² w_i ≤ 1` with the weights
+    /// `w = 1/E²`), in its own frame.
     Box {
         shape_from_world: &'a Affine3A,
         extent: Vec3,
+        ellipsoid: Vec3,
     },
 }
 
@@ -1117,6 +1148,7 @@ impl Filter<'_> {
             Filter::Box {
                 shape_from_world,
                 extent,
+                ellipsoid: w,
             } => {
                 let m = shape_from_world.matrix3;
                 let (cx, cy, cz) = (m.x_axis, m.y_axis, m.z_axis);
@@ -1124,7 +1156,8 @@ impl Filter<'_> {
                 let lx = cx.x * q.x + cy.x * q.y + cz.x * q.z + o.x;
                 let ly = cx.y * q.x + cy.y * q.y + cz.y * q.z + o.y;
                 let lz = cx.z * q.x + cy.z * q.y + cz.z * q.z + o.z;
-                lx.abs() <= extent.x && ly.abs() <= extent.y && lz.abs() <= extent.z
+                let in_box = lx.abs() <= extent.x && ly.abs() <= extent.y && lz.abs() <= extent.z;
+                in_box && lx * lx * w.x + ly * ly * w.y + lz * lz * w.z <= 1.0
             }
         }
     }
@@ -1175,7 +1208,8 @@ fn filter_run(sc: &mut PassScratch, a: usize, b: usize, filter: Filter<'_>, owed
         Filter::Box {
             shape_from_world,
             extent,
-        } => box_filter(shape_from_world, extent, qx, qy, qz, gate, hit),
+            ellipsoid,
+        } => box_filter(shape_from_world, extent, ellipsoid, [qx, qy, qz], gate, hit),
     }
     sc.hit[len..].fill(0);
     collect_hits(&sc.hit, &mut sc.hit_index);
@@ -1286,17 +1320,18 @@ crate::sim::simd::multiversion! {
 }
 
 crate::sim::simd::multiversion! {
-    /// `hit[i] = 1` where gated fat point `i`, mapped by `shape_from_world`, lies in the box
-    /// `|p| ≤ extent`.
+    /// `hit[i] = 1` where gated fat point `i`, mapped by `shape_from_world` to `p`, lies in
+    /// the box `|p| ≤ extent` and the ellipsoid `Σ p_j² w_j ≤ 1` (the weights `w = 1/E²`, zero
+    /// for no ellipsoid).
     fn box_filter(
         shape_from_world: &Affine3A,
         extent: Vec3,
-        qx: &[f32],
-        qy: &[f32],
-        qz: &[f32],
+        w: Vec3,
+        q: [&[f32]; 3],
         gate: &[u8],
         hit: &mut [u8],
     ) {
+        let [qx, qy, qz] = q;
         let n = hit.len().min(qx.len()).min(qy.len()).min(qz.len()).min(gate.len());
         let m = shape_from_world.matrix3;
         let (cx, cy, cz) = (m.x_axis, m.y_axis, m.z_axis);
@@ -1305,8 +1340,9 @@ crate::sim::simd::multiversion! {
             let lx = cx.x * qx[i] + cy.x * qy[i] + cz.x * qz[i] + o.x;
             let ly = cx.y * qx[i] + cy.y * qy[i] + cz.y * qz[i] + o.y;
             let lz = cx.z * qx[i] + cy.z * qy[i] + cz.z * qz[i] + o.z;
-            let inside = lx.abs() <= extent.x && ly.abs() <= extent.y && lz.abs() <= extent.z;
-            hit[i] = u8::from(inside) & gate[i];
+            let in_box = lx.abs() <= extent.x && ly.abs() <= extent.y && lz.abs() <= extent.z;
+            let in_ellipsoid = lx * lx * w.x + ly * ly * w.y + lz * lz * w.z <= 1.0;
+            hit[i] = u8::from(in_box & in_ellipsoid) & gate[i];
         }
     }
 }
