@@ -330,7 +330,7 @@ impl Broadphase {
         self.runs.clear();
         self.run_offsets.clear();
         self.run_offsets.push(0);
-        for (s, extent) in shapes.iter().zip(&self.extents) {
+        for ((s, extent), w) in shapes.iter().zip(&self.extents).zip(&self.ellipsoids) {
             let reach = *extent + Vec3::splat(grow);
             let center = Vec3::from(s.world_from_shape.translation);
             let mat = s.world_from_shape.matrix3;
@@ -367,16 +367,13 @@ impl Broadphase {
                 let (ones, hit) = (&sc.ones[a..b], &mut sc.hit[..len]);
                 match sphere_reach {
                     Some(r) => sphere_filter(center, r * r, gx, gy, gz, ones, hit),
-                    // The grown reach is a box only (an ellipsoid's neighbourhood is not an
-                    // ellipsoid): no ellipsoid weights.
-                    None => box_filter(
-                        &s.shape_from_world,
-                        reach,
-                        Vec3::ZERO,
-                        [gx, gy, gz],
-                        ones,
-                        hit,
-                    ),
+                    // The ellipsoid `E` grown by `g` is inside `(1 + g/E_min) E` (a ball of
+                    // radius `g` is inside `(g/E_min) E`).
+                    None => {
+                        let e_min = w.max_element().sqrt().recip();
+                        let grown = *w / (1.0 + grow / e_min).powi(2);
+                        box_filter(&s.shape_from_world, reach, grown, [gx, gy, gz], ones, hit)
+                    }
                 }
                 sc.hit[len..].fill(0);
                 collect_hits(&sc.hit, &mut sc.hit_index);
