@@ -10,14 +10,16 @@
 //! - **Broadphase with temporal coherence.** Per shape, the free points that may meet it are
 //!   kept as *runs* of consecutive point indices (the skin grid is spatially coherent, so a
 //!   muscle meets a few arcs of a few rows). The runs are built from each shape's conservative
-//!   box in its own frame ([`ShapeGeometry::extent_m`]), grown by the largest fat and a
-//!   margin, testing only grid rows whose bounding box meets the shape's world box (a
-//!   two-level hierarchy). They stay valid while the points' accumulated movement (`max |v|·h`
+//!   box and ellipsoid in its own frame ([`ShapeGeometry::extent_m`],
+//!   [`ShapeGeometry::bounding_ellipsoid_m`]), both grown by the largest fat and a margin,
+//!   testing only grid rows whose bounding box meets the shape's world box (a two-level
+//!   hierarchy). They stay valid while the points' accumulated movement (`max |v|·h`
 //!   per step) plus each shape's movement (translation, rotation angle × extent, growth of the
 //!   extent) stays below the margin, so no shape can reach a point that is not in its runs.
 //! - **Per shape, two stages.** A vectorised loop over the runs maps every fat point into the
-//!   shape frame and keeps those inside the shape's exact extent box (spheres: the exact test
-//!   and projection right there). The survivors form a `Batch` whose values and gradients
+//!   shape frame and keeps those inside both the shape's extent box and its bounding
+//!   ellipsoid, which cuts off the box's corners (half the box's points on the torso; spheres:
+//!   the exact test and projection right there). The survivors form a `Batch` whose values and gradients
 //!   are computed by the vectorised kernels (`super::kernels`); points with `F < 0` are
 //!   projected by two batched Newton steps along the gradient (a scalar exact projection for
 //!   any that do not land within [`PROJECTION_TOLERANCE_M`]), except those whose sign value
