@@ -103,6 +103,9 @@ pub fn keep_outside(
                 s.bound_radius_m,
                 s.geometry.extent_m(),
             );
+            // The bounding ellipsoid cuts off the box's corners (widened against rounding, as
+            // in the constraint pass).
+            let ellipsoid = s.geometry.bounding_ellipsoid_m() * 1.001;
             test.clear();
             for (j, (lo, hi)) in rows.iter().enumerate() {
                 if (center - center.clamp(*lo, *hi)).length_squared() >= r * r {
@@ -114,7 +117,8 @@ pub fn keep_outside(
                         continue;
                     }
                     let local = s.shape_from_world.transform_point3(p);
-                    if local.abs().cmple(extent).all() {
+                    let near = (local / ellipsoid).length_squared() <= 1.0;
+                    if near && local.abs().cmple(extent).all() {
                         test.push(k as u32, local);
                     }
                 }
