@@ -104,8 +104,10 @@ pub fn keep_outside(
                 s.geometry.extent_m(),
             );
             // The bounding ellipsoid cuts off the box's corners (widened against rounding, as
-            // in the constraint pass).
-            let ellipsoid = s.geometry.bounding_ellipsoid_m() * 1.001;
+            // in the constraint pass; weights `1/E²`, none for a degenerate axis).
+            let e = s.geometry.bounding_ellipsoid_m() * 1.001;
+            let w = Vec3::ONE / (e * e);
+            let w = if w.is_finite() { w } else { Vec3::ZERO };
             test.clear();
             for (j, (lo, hi)) in rows.iter().enumerate() {
                 if (center - center.clamp(*lo, *hi)).length_squared() >= r * r {
@@ -117,7 +119,7 @@ pub fn keep_outside(
                         continue;
                     }
                     let local = s.shape_from_world.transform_point3(p);
-                    let near = (local / ellipsoid).length_squared() <= 1.0;
+                    let near = (local * local).dot(w) <= 1.0;
                     if near && local.abs().cmple(extent).all() {
                         test.push(k as u32, local);
                     }

@@ -19,8 +19,8 @@
 //! - **Per shape, two stages.** A vectorised loop over the runs maps every fat point into the
 //!   shape frame and keeps those inside both the shape's extent box and its bounding
 //!   ellipsoid, which cuts off the box's corners (half the box's points on the torso; spheres:
-//!   the exact test and projection right there). The survivors form a `Batch` whose values and gradients
-//!   are computed by the vectorised kernels (`super::kernels`); points with `F < 0` are
+//!   the exact test and projection right there). The survivors form a `Batch` whose values
+//!   and gradients are computed by the vectorised kernels (`super::kernels`); points with `F < 0` are
 //!   projected by two batched Newton steps along the gradient (a scalar exact projection for
 //!   any that do not land within [`PROJECTION_TOLERANCE_M`]), except those whose sign value
 //!   alone shows them within half that tolerance of an undeformed shape's surface
@@ -258,7 +258,9 @@ impl Broadphase {
                 Primitive::Sphere { .. } if s.geometry.is_undeformed() => Vec3::ZERO,
                 _ => {
                     let e = s.geometry.bounding_ellipsoid_m() * (1.0 + ELLIPSOID_SLACK);
-                    Vec3::ONE / (e * e)
+                    let w = Vec3::ONE / (e * e);
+                    // A degenerate axis (0 or NaN) would drop every point: no ellipsoid then.
+                    if w.is_finite() { w } else { Vec3::ZERO }
                 }
             }));
         let mut shape_moved = 0.0f32;
