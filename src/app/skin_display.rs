@@ -103,11 +103,8 @@ pub fn keep_outside(
                 s.bound_radius_m,
                 s.geometry.extent_m(),
             );
-            // The bounding ellipsoid cuts off the box's corners (widened against rounding, as
-            // in the constraint pass; weights `1/E²`, none for a degenerate axis).
-            let e = s.geometry.bounding_ellipsoid_m() * 1.001;
-            let w = Vec3::ONE / (e * e);
-            let w = if w.is_finite() { w } else { Vec3::ZERO };
+            // The bounding ellipsoid cuts off the box's corners.
+            let w = s.geometry.bounding_ellipsoid_weights();
             test.clear();
             for (j, (lo, hi)) in rows.iter().enumerate() {
                 if (center - center.clamp(*lo, *hi)).length_squared() >= r * r {

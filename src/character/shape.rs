@@ -54,6 +54,8 @@ pub const MAX_DEFORMATIONS: usize = 4;
 
 /// Smallest scale a taper may reach (the scale is clamped here so the map stays invertible).
 pub const MIN_TAPER_SCALE: f32 = 0.05;
+/// Relative widening of [`ShapeGeometry::bounding_ellipsoid_weights`].
+pub const BOUND_SLACK: f32 = 1e-3;
 
 /// Smallest and largest superellipsoid exponent accepted (beyond 2 the surface has cusps where
 /// the gradient is infinite).
@@ -716,6 +718,17 @@ impl ShapeGeometry {
             bx = Self::deformed_box(bx, d);
         }
         e
+    }
+
+    /// [`Self::bounding_ellipsoid_m`] as weights `w = 1/E²` per axis, widened by
+    /// [`BOUND_SLACK`] so that rounding in a mapping to the shape frame cannot drop a point of
+    /// the shape: every shape point `p` has `Σ p_i² w_i ≤ 1`. An unbounded axis weighs 0, and
+    /// so does every axis when a weight would not be finite (a degenerate axis), which turns
+    /// the test off rather than dropping every point, 1/m².
+    pub fn bounding_ellipsoid_weights(&self) -> Vec3 {
+        let e = self.bounding_ellipsoid_m() * (1.0 + BOUND_SLACK);
+        let w = Vec3::ONE / (e * e);
+        if w.is_finite() { w } else { Vec3::ZERO }
     }
 
     /// Rest space to shape (deformed) space.

@@ -54,9 +54,6 @@ const SETTLED_M: f32 = PROJECTION_TOLERANCE_M;
 /// 128×128 skin a whole row (the old gap) made the first stage test about 155k points per
 /// pass for 28k hits; 16 or 32 points cost 3.6 % fewer instructions in all, 64 points 2.6 %.
 const RUN_GAP: usize = 32;
-/// Relative widening of each shape's bounding ellipsoid in the first stage's filter, so that
-/// rounding in the mapping to the shape frame cannot drop a point of the shape.
-const ELLIPSOID_SLACK: f32 = 1e-3;
 /// Batched Newton steps before the scalar projection takes over.
 const NEWTON_STEPS: usize = 2;
 
@@ -73,7 +70,7 @@ pub struct Broadphase {
     /// Each shape's extent this pass.
     extents: Vec<Vec3>,
     /// Each shape's bounding ellipsoid this pass as `1/E²` per axis
-    /// ([`ShapeGeometry::bounding_ellipsoid_m`], widened by [`ELLIPSOID_SLACK`]).
+    /// ([`ShapeGeometry::bounding_ellipsoid_weights`]).
     ellipsoids: Vec<Vec3>,
     moved_m: f32,
     valid: bool,
@@ -256,12 +253,7 @@ impl Broadphase {
             .extend(shapes.iter().map(|s| match s.geometry.primitive {
                 // The sphere stage's test is exact and needs no bound.
                 Primitive::Sphere { .. } if s.geometry.is_undeformed() => Vec3::ZERO,
-                _ => {
-                    let e = s.geometry.bounding_ellipsoid_m() * (1.0 + ELLIPSOID_SLACK);
-                    let w = Vec3::ONE / (e * e);
-                    // A degenerate axis (0 or NaN) would drop every point: no ellipsoid then.
-                    if w.is_finite() { w } else { Vec3::ZERO }
-                }
+                _ => s.geometry.bounding_ellipsoid_weights(),
             }));
         let mut shape_moved = 0.0f32;
         if self.ref_frames.len() == shapes.len() {
@@ -1149,17 +1141,8 @@ impl Filter<'_> {
             Filter::Box {
                 shape_from_world,
                 extent,
-                ellipsoid: w,
-            } => {
-                let m = shape_from_world.matrix3;
-                let (cx, cy, cz) = (m.x_axis, m.y_axis, m.z_axis);
-                let o = shape_from_world.translation;
-                let lx = cx.x * q.x + cy.x * q.y + cz.x * q.z + o.x;
-                let ly = cx.y * q.x + cy.y * q.y + cz.y * q.z + o.y;
-                let lz = cx.z * q.x + cy.z * q.y + cz.z * q.z + o.z;
-                let in_box = lx.abs() <= extent.x && ly.abs() <= extent.y && lz.abs() <= extent.z;
-                in_box && lx * lx * w.x + ly * ly * w.y + lz * lz * w.z <= 1.0
-            }
+                ellipsoid,
+            } => in_box_and_ellipsoid(shape_from_world, extent, ellipsoid, [q.x, q.y, q.z]),
         }
     }
 }
@@ -1334,18 +1317,25 @@ crate::sim::simd::multiversion! {
     ) {
         let [qx, qy, qz] = q;
         let n = hit.len().min(qx.len()).min(qy.len()).min(qz.len()).min(gate.len());
-        let m = shape_from_world.matrix3;
-        let (cx, cy, cz) = (m.x_axis, m.y_axis, m.z_axis);
-        let o = shape_from_world.translation;
         for i in 0..n {
-            let lx = cx.x * qx[i] + cy.x * qy[i] + cz.x * qz[i] + o.x;
-            let ly = cx.y * qx[i] + cy.y * qy[i] + cz.y * qz[i] + o.y;
-            let lz = cx.z * qx[i] + cy.z * qy[i] + cz.z * qz[i] + o.z;
-            let in_box = lx.abs() <= extent.x && ly.abs() <= extent.y && lz.abs() <= extent.z;
-            let in_ellipsoid = lx * lx * w.x + ly * ly * w.y + lz * lz * w.z <= 1.0;
-            hit[i] = u8::from(in_box & in_ellipsoid) & gate[i];
+            let inside = in_box_and_ellipsoid(shape_from_world, extent, w, [qx[i], qy[i], qz[i]]);
+            hit[i] = u8::from(inside) & gate[i];
         }
     }
+}
+
+/// Whether the world point `q`, mapped by `shape_from_world` to `p`, lies in the box
+/// `|p| ≤ extent` and the ellipsoid `Σ p_j² w_j ≤ 1`: the test of [`box_filter`] (inlined into
+/// each of its copies, branch-free) and of [`Filter::contains`], with the same arithmetic.
+#[inline(always)]
+fn in_box_and_ellipsoid(shape_from_world: &Affine3A, extent: Vec3, w: Vec3, q: [f32; 3]) -> bool {
+    let m = shape_from_world.matrix3;
+    let (cx, cy, cz, o) = (m.x_axis, m.y_axis, m.z_axis, shape_from_world.translation);
+    let lx = cx.x * q[0] + cy.x * q[1] + cz.x * q[2] + o.x;
+    let ly = cx.y * q[0] + cy.y * q[1] + cz.y * q[2] + o.y;
+    let lz = cx.z * q[0] + cy.z * q[1] + cz.z * q[2] + o.z;
+    let in_box = (lx.abs() <= extent.x) & (ly.abs() <= extent.y) & (lz.abs() <= extent.z);
+    in_box & (lx * lx * w.x + ly * ly * w.y + lz * lz * w.z <= 1.0)
 }
 
 /// Outward unit normal of a shape at a surface point, world.
