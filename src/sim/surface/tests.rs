@@ -460,6 +460,44 @@ fn bad_parameters_are_refused_and_change_nothing() {
 }
 
 #[test]
+fn selections_reach_exactly_the_chosen_free_points_and_tissue_springs() {
+    let (mut m, _) = model_and_motion("penguin", 16);
+    let (around, free) = (m.core.around, m.core.free());
+    let before = m.core.materials.clone();
+    // A point of the fixed first row, two free points and one of the fixed last row: only the
+    // free ones change.
+    let points = [3, around + 5, around + free - 1, 2 * around + free - 2].map(|k| k as u32);
+    m.apply(&ParameterChange::Mass(
+        Selection::Some(points.to_vec()),
+        2.0,
+    ))
+    .expect("accepted");
+    for f in 0..free {
+        let want = if f == 5 || f == free - 1 {
+            2.0
+        } else {
+            before.mass_kg[f]
+        };
+        assert_eq!(m.core.materials.mass_kg[f], want, "free point {f}");
+    }
+    // Tissue springs: every model spring made from a chosen one, and no other.
+    let ks_before = m.core.springs.ks.clone();
+    m.apply(&ParameterChange::TissueStiffness(
+        Selection::Some(vec![7, 40]),
+        77.0,
+    ))
+    .expect("accepted");
+    let mut changed = 0;
+    for (q, &src) in m.core.springs.source.iter().enumerate() {
+        let chosen = src == 7 || src == 40;
+        let want = if chosen { 77.0 } else { ks_before[q] };
+        assert_eq!(m.core.springs.ks[q], want, "spring {q} from {src}");
+        changed += usize::from(chosen);
+    }
+    assert!(changed > 0, "the chosen tissue springs make model springs");
+}
+
+#[test]
 fn resolution_changes_keep_the_shape_and_keep_simulating() {
     let (mut m, motion) = model_and_motion("torso", 16);
     let mut poses = MotionPoses(&motion);
