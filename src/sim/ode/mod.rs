@@ -16,6 +16,9 @@
 //!   with a fixed-point iteration for velocity-dependent forces and an embedded Euler error
 //!   estimate. Deviation: eq. 7f as printed reads `v + (h/2) a`; the leapfrog update (and the
 //!   only consistent one: constant acceleration must give `v + h a`) is `v + h a`, used here.
+//!   Addition: the iteration starts from the system's estimate of its fixed point when the
+//!   system has one ([`SecondOrderSystem::velocity_fixed_point`]) instead of from `v_t`; its
+//!   own convergence test (eq. 7g) still decides when to stop.
 //! - [`IntegratorKind::Rk2`]: adaptive Runge-Kutta 2(1) (Heun with embedded Euler).
 //! - [`IntegratorKind::Rk4`]: classical fourth-order Runge-Kutta with a fixed step.
 
@@ -58,6 +61,27 @@ pub trait SecondOrderSystem {
     ) {
         a.copy_from_slice(a_pos);
         self.add_velocity_accel(t_s, x, v, a);
+    }
+
+    /// A start for the Verlet velocity iteration (LEMAN eq. 7b-g): writes into `v_new` the
+    /// system's estimate of the iteration's fixed point `v⁺ = v + h a(t, x, (v + v⁺)/2)`, where
+    /// `t` and `x` are those of the last [`position_accel`](Self::position_accel) call and
+    /// `a_pos` its result, and returns true; or returns false, leaving `v_new` alone, and the
+    /// iteration starts from `v` as in the paper. The iteration's own test (eq. 7g) still
+    /// decides when it has converged, so a poor estimate only costs evaluations; a system whose
+    /// velocity forces act point by point can solve the fixed point exactly and save most of
+    /// them. The default has no estimate.
+    fn velocity_fixed_point(
+        &mut self,
+        t_s: f64,
+        x: &[f32],
+        v: &[f32],
+        a_pos: &[f32],
+        h_s: f64,
+        v_new: &mut [f32],
+    ) -> bool {
+        let _ = (t_s, x, v, a_pos, h_s, v_new);
+        false
     }
 
     /// Whether any force depends on velocity. When not, Verlet needs a single evaluation.
@@ -373,20 +397,29 @@ impl Integrator {
                 *vn = vi + h * ai;
             }
         } else {
+            // (7b) v_{t+h} = v_t, unless the system can do better: from its estimate of the
+            // fixed point, (7c) v_{t+h/2} = (v_t + v_{t+h})/2 and the eq. 8 velocity scales
+            // 1/max(|v_t|, v^thr) are taken here, and the first iteration may already pass
+            // the test below.
+            let started = sys.velocity_fixed_point(t_half, x_half, v, a_pos, h64, v_new);
+            if started {
+                verlet_velocity_start(v, v_thr, v_new, v_mid, inv_v_scale);
+            }
             for it in 0..max_iter {
                 // (7d) a = M⁻¹ f(r_{t+h/2}, v_{t+h/2}); only the velocity part changes.
-                let v_half: &[f32] = if it == 0 { v } else { v_mid };
+                let from_v = it == 0 && !started;
+                let v_half: &[f32] = if from_v { v } else { v_mid };
                 sys.velocity_accel_from(t_half, x_half, v_half, a_pos, a);
                 velocity_evals += 1;
                 // (7e-7g) v_old = v_{t+h}; v_{t+h} = v_t + h a; until scaled change ≤ ε_v;
-                // fused with the next iteration's (7c). The first iteration also takes the
-                // eq. 8 velocity scales 1/max(|v_t|, v^thr).
-                let change = if it == 0 {
+                // fused with the next iteration's (7c). A first iteration from v_t also takes
+                // the eq. 8 velocity scales 1/max(|v_t|, v^thr).
+                let change = if from_v {
                     verlet_velocity_first(v, v_thr, h, a, v_new, v_mid, inv_v_scale)
                 } else {
                     verlet_velocity_update(v, inv_v_scale, h, a, v_new, v_mid)
                 };
-                if it > 0 && change <= eps_v {
+                if !from_v && change <= eps_v {
                     converged = true;
                     break;
                 }
@@ -641,6 +674,20 @@ crate::sim::simd::multiversion! {
             acc.push(l, one(*v, *a, v_thr, h, vn, vm, s));
         }
         acc.finish()
+    }
+}
+
+crate::sim::simd::multiversion! {
+    /// The Verlet velocity iteration's start from a system's estimate `v_new` of its fixed
+    /// point ([`SecondOrderSystem::velocity_fixed_point`]): eq. 7c `v_mid = (v_new + v)/2`
+    /// and the eq. 8 velocity scale `inv_v_scale = 1 / max(|v|, v_thr)`.
+    fn verlet_velocity_start(v: &[f32], v_thr: f32, v_new: &[f32], v_mid: &mut [f32], inv_v_scale: &mut [f32]) {
+        let n = v.len().min(v_new.len()).min(v_mid.len()).min(inv_v_scale.len());
+        let (v, v_new, v_mid, inv_v_scale) = (&v[..n], &v_new[..n], &mut v_mid[..n], &mut inv_v_scale[..n]);
+        for i in 0..n {
+            inv_v_scale[i] = 1.0 / v[i].abs().max(v_thr);
+            v_mid[i] = 0.5 * (v_new[i] + v[i]);
+        }
     }
 }
 

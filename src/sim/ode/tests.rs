@@ -107,6 +107,104 @@ fn rk4_is_fourth_order() {
     assert!((3.7..4.3).contains(&p), "RK4 order {p}");
 }
 
+/// What [`GuessingOscillator`] offers the Verlet iteration as its start.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Start {
+    /// No estimate: the paper's start from `v_t`.
+    None,
+    /// The exact fixed point of `v⁺ = v + h (a_pos − c (v + v⁺)/2)`.
+    Exact,
+    /// A wrong estimate (off by 3 m/s).
+    Wrong,
+}
+
+/// [`Oscillator`] that offers the Verlet velocity iteration a start.
+struct GuessingOscillator {
+    inner: Oscillator,
+    start: Start,
+}
+
+impl SecondOrderSystem for GuessingOscillator {
+    fn dofs(&self) -> usize {
+        self.inner.dofs()
+    }
+    fn position_accel(&mut self, t: f64, x: &[f32], a: &mut [f32]) {
+        self.inner.position_accel(t, x, a);
+    }
+    fn add_velocity_accel(&mut self, t: f64, x: &[f32], v: &[f32], a: &mut [f32]) {
+        self.inner.add_velocity_accel(t, x, v, a);
+    }
+    fn velocity_fixed_point(
+        &mut self,
+        _t_s: f64,
+        _x: &[f32],
+        v: &[f32],
+        a_pos: &[f32],
+        h_s: f64,
+        v_new: &mut [f32],
+    ) -> bool {
+        let (h, c) = (h_s as f32, self.inner.c);
+        for ((n, v), a) in v_new.iter_mut().zip(v).zip(a_pos) {
+            *n = match self.start {
+                Start::None => return false,
+                Start::Exact => ((2.0 - h * c) * v + 2.0 * h * a) / (2.0 + h * c),
+                Start::Wrong => v + 3.0,
+            };
+        }
+        true
+    }
+}
+
+/// The damped oscillator over 200 Verlet steps of 0.05 s from `start`: the final state and
+/// the velocity evaluations per step.
+fn verlet_from(start: Start) -> ([f32; 2], f64) {
+    let h = 0.05;
+    let mut sys = GuessingOscillator {
+        inner: Oscillator {
+            omega: 1.0,
+            c: 4.0,
+            n: 1,
+        },
+        start,
+    };
+    let tolerances = Tolerances {
+        velocity_tolerance: 1e-6,
+        ..fixed_step(h)
+    };
+    let mut integ = Integrator::new(IntegratorKind::Verlet, tolerances);
+    let (mut x, mut v) = ([1.0f32], [0.0f32]);
+    let (mut xn, mut vn) = ([0.0f32], [0.0f32]);
+    let mut evals = 0u32;
+    for i in 0..200 {
+        let p = integ.propose(&mut sys, i as f64 * h, h, &x, &v, &mut xn, &mut vn);
+        assert!(p.accepted, "{start:?} step {i}");
+        evals += p.velocity_evals;
+        x = xn;
+        v = vn;
+    }
+    ([x[0], v[0]], f64::from(evals) / 200.0)
+}
+
+#[test]
+fn a_systems_fixed_point_start_saves_velocity_evaluations_and_changes_nothing_else() {
+    let (paper, paper_evals) = verlet_from(Start::None);
+    let (exact, exact_evals) = verlet_from(Start::Exact);
+    let (wrong, wrong_evals) = verlet_from(Start::Wrong);
+    // hc/2 = 0.1: the iteration from v_t needs several evaluations to reach 1e-6.
+    assert!(paper_evals >= 4.0, "{paper_evals}");
+    assert_eq!(exact_evals, 1.0, "the exact start passes the first test");
+    // The iteration, not the start, decides where it ends: all three end at the fixed point.
+    assert!(wrong_evals > paper_evals, "{wrong_evals} vs {paper_evals}");
+    for (got, name) in [(exact, "exact"), (wrong, "wrong")] {
+        for k in 0..2 {
+            assert!(
+                (got[k] - paper[k]).abs() <= 1e-5,
+                "{name}: {got:?} vs {paper:?}"
+            );
+        }
+    }
+}
+
 fn energy(x: f32, v: f32, omega: f32) -> f32 {
     0.5 * v * v + 0.5 * omega * omega * x * x
 }

@@ -188,6 +188,27 @@ impl SecondOrderSystem for Eval<'_> {
         forces::velocity_accel_from(&self.input, self.scratch, v, a_pos, a);
         self.add_time(start);
     }
+    fn velocity_fixed_point(
+        &mut self,
+        _t_s: f64,
+        _x: &[f32],
+        v: &[f32],
+        a_pos: &[f32],
+        h_s: f64,
+        v_new: &mut [f32],
+    ) -> bool {
+        let start = self.now();
+        let solved = forces::midpoint_velocity_fixed_point(
+            &self.input,
+            self.scratch,
+            v,
+            a_pos,
+            h_s as f32,
+            v_new,
+        );
+        self.add_time(start);
+        solved
+    }
     /// For each point in contact after the last step, drops the error component along the
     /// contact normal when it points into the muscle: the step went further in than Euler's,
     /// and the constraint phase replaces that motion (checked against ε_c, section 4.2.3).
