@@ -681,9 +681,16 @@ crate::sim::simd::multiversion! {
     /// The Verlet velocity iteration's start from a system's estimate `v_new` of its fixed
     /// point ([`SecondOrderSystem::velocity_fixed_point`]): eq. 7c `v_mid = (v_new + v)/2`
     /// and the eq. 8 velocity scale `inv_v_scale = 1 / max(|v|, v_thr)`.
-    fn verlet_velocity_start(v: &[f32], v_thr: f32, v_new: &[f32], v_mid: &mut [f32], inv_v_scale: &mut [f32]) {
+    fn verlet_velocity_start(
+        v: &[f32],
+        v_thr: f32,
+        v_new: &[f32],
+        v_mid: &mut [f32],
+        inv_v_scale: &mut [f32],
+    ) {
         let n = v.len().min(v_new.len()).min(v_mid.len()).min(inv_v_scale.len());
-        let (v, v_new, v_mid, inv_v_scale) = (&v[..n], &v_new[..n], &mut v_mid[..n], &mut inv_v_scale[..n]);
+        let (v, v_new) = (&v[..n], &v_new[..n]);
+        let (v_mid, inv_v_scale) = (&mut v_mid[..n], &mut inv_v_scale[..n]);
         for i in 0..n {
             inv_v_scale[i] = 1.0 / v[i].abs().max(v_thr);
             v_mid[i] = 0.5 * (v_new[i] + v[i]);

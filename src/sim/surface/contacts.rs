@@ -40,7 +40,8 @@
 
 use glam::Vec3;
 
-use super::constraints::{Pushes, collect_hits};
+use super::constraints::Pushes;
+use super::masks::collect_hits;
 use crate::character::ShapeInstance;
 
 /// Steps a contact holds its point after the push that made it (the push's own step counts

@@ -1183,9 +1183,16 @@ pub fn midpoint_velocity_fixed_point(
 crate::sim::simd::multiversion! {
     /// [`midpoint_velocity_fixed_point`] for points without a spring (one block):
     /// `v⁺ = ((2 − hγ/m) v + 2h a_pos)/(2 + hγ/m)`.
-    fn damped_fixed_point(damping_per_mass: &[f32], v: &[f32], a_pos: &[f32], h: f32, v_new: &mut [f32]) {
+    fn damped_fixed_point(
+        damping_per_mass: &[f32],
+        v: &[f32],
+        a_pos: &[f32],
+        h: f32,
+        v_new: &mut [f32],
+    ) {
         let n = damping_per_mass.len().min(v.len()).min(a_pos.len()).min(v_new.len());
-        let (dpm, v, a_pos, v_new) = (&damping_per_mass[..n], &v[..n], &a_pos[..n], &mut v_new[..n]);
+        let (dpm, v, a_pos) = (&damping_per_mass[..n], &v[..n], &a_pos[..n]);
+        let v_new = &mut v_new[..n];
         for i in 0..n {
             let hc = h * dpm[i];
             v_new[i] = ((2.0 - hc) * v[i] + 2.0 * h * a_pos[i]) / (2.0 + hc);

@@ -67,7 +67,7 @@ impl Batch {
 
     /// Replaces the entries with those of `src` whose value is below `−band` (inside, and by
     /// more than `band`; `band ≥ 0`), in order. The chosen entries are listed first (a
-    /// vectorised comparison and the word-wise compaction of `collect_hits`, no branch per
+    /// vectorised comparison and the word-wise compaction of `masks::collect_hits`, no branch per
     /// entry), then the four arrays are gathered for those alone: about one sign-tested entry
     /// in six is chosen, and compacting all four arrays wrote every entry.
     pub fn assign_inside_of(&mut self, src: &Batch, band: f32) {
@@ -75,7 +75,7 @@ impl Batch {
         self.mask.resize(n.next_multiple_of(8), 0);
         below(&src.value[..n], -band, &mut self.mask[..n]);
         self.mask[n..].fill(0);
-        super::constraints::collect_hits(&self.mask, &mut self.chosen);
+        super::masks::collect_hits(&self.mask, &mut self.chosen);
         let k = self.chosen.len();
         self.point.resize(k, 0);
         for c in &mut self.p {

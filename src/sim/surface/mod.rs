@@ -25,6 +25,7 @@ mod contacts;
 mod fastmath;
 pub mod forces;
 pub(crate) mod kernels;
+mod masks;
 mod moves;
 mod resample;
 #[cfg(test)]
