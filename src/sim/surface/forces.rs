@@ -27,6 +27,8 @@
 
 #![allow(clippy::needless_range_loop)] // index loops over parallel SoA arrays read best as they are
 
+use std::ops::Range;
+
 use glam::Vec3;
 
 /// Per-step kinematic input of the forces: the fixed rows and tissue anchors at the start and
@@ -1074,18 +1076,13 @@ pub fn velocity_accel_from(
     // One spring per point of `o..o + ns`: damping alone outside the run, damping and tissue
     // in one pass over it (the same operations in the same order as the two passes).
     let dpm = &mat.damping_per_mass;
-    for c in 0..3 {
-        let b = c * free;
-        for (lo, hi) in [(0, o), (o + ns, free)] {
-            if hi > lo {
-                damping_accel_from(
-                    &dpm[lo..hi],
-                    &v[b + lo..b + hi],
-                    &a_pos[b + lo..b + hi],
-                    &mut a[b + lo..b + hi],
-                );
-            }
-        }
+    for (points, dofs) in outside_run(free, o, ns) {
+        damping_accel_from(
+            &dpm[points],
+            &v[dofs.clone()],
+            &a_pos[dofs.clone()],
+            &mut a[dofs],
+        );
     }
     let (ax, rest) = a.split_at_mut(free);
     let (ay, az) = rest.split_at_mut(free);
@@ -1150,19 +1147,14 @@ pub fn midpoint_velocity_fixed_point(
         }
     };
     let dpm = &mat.damping_per_mass;
-    for c in 0..3 {
-        let b = c * free;
-        for (lo, hi) in [(0, o), (o + ns, free)] {
-            if hi > lo {
-                damped_fixed_point(
-                    &dpm[lo..hi],
-                    &v[b + lo..b + hi],
-                    &a_pos[b + lo..b + hi],
-                    h,
-                    &mut v_new[b + lo..b + hi],
-                );
-            }
-        }
+    for (points, dofs) in outside_run(free, o, ns) {
+        damped_fixed_point(
+            &dpm[points],
+            &v[dofs.clone()],
+            &a_pos[dofs.clone()],
+            h,
+            &mut v_new[dofs],
+        );
     }
     if ns > 0 {
         let (nx, rest) = v_new.split_at_mut(free);
@@ -1250,6 +1242,22 @@ crate::sim::simd::multiversion! {
             nz[q] = 2.0 * (b[2] - bk * d[2][q]) - pv[2][q];
         }
     }
+}
+
+/// The free points outside a run of springs `o..o + ns` (one spring per point) and their
+/// degrees of freedom in each SoA block (`[x…, y…, z…]` over `free` points): per block, the
+/// points before the run and those after it, as `(point range, dof range)`, empty ones left out.
+fn outside_run(
+    free: usize,
+    o: usize,
+    ns: usize,
+) -> impl Iterator<Item = (Range<usize>, Range<usize>)> {
+    (0..3).flat_map(move |c| {
+        [(0, o), (o + ns, free)]
+            .into_iter()
+            .filter(|(lo, hi)| hi > lo)
+            .map(move |(lo, hi)| (lo..hi, c * free + lo..c * free + hi))
+    })
 }
 
 /// The springs' [`contiguous_run`], from the last position evaluation when it was for these
