@@ -16,7 +16,7 @@
 //! ([`crate::character::resample::resample_field`], LEMAN 6.5), so it follows the model at any
 //! resolution.
 
-use crate::character::ShapeInstance;
+use crate::character::{ShapeInstance, within_bounds};
 use crate::sim::surface::forces;
 use crate::sim::surface::kernels::Batch;
 use glam::Vec3;
@@ -116,8 +116,7 @@ pub fn keep_outside(
                         continue;
                     }
                     let local = s.shape_from_world.transform_point3(p);
-                    let near = (local * local).dot(w) <= 1.0;
-                    if near && local.abs().cmple(extent).all() {
+                    if within_bounds(local, extent, w) {
                         test.push(k as u32, local);
                     }
                 }

@@ -28,7 +28,7 @@ pub use crate::anim::keyed::{Extrapolation, KeyPosture, Motion};
 pub use file::{CharacterFileError, FORMAT_VERSION};
 pub use shape::{
     Deformation, PROJECTION_TOLERANCE_M, Param, ParamKey, Primitive, Resolved, Shape,
-    ShapeGeometry, ShapeId, ShapeInstance,
+    ShapeGeometry, ShapeId, ShapeInstance, within_bounds,
 };
 pub use skeleton::{Dof, DofRef, Joint, JointId, Posture, Skeleton, SkeletonPose};
 pub use skin::{Skin, Sym2};

@@ -57,6 +57,17 @@ pub const MIN_TAPER_SCALE: f32 = 0.05;
 /// Relative widening of [`ShapeGeometry::bounding_ellipsoid_weights`].
 pub const BOUND_SLACK: f32 = 1e-3;
 
+/// Whether a point `p` of a shape's own frame (metres) lies in both of the shape's bounds: the
+/// box `|p_i| ≤ extent_i` ([`ShapeGeometry::extent_m`]) and the ellipsoid `Σ p_i² w_i ≤ 1`
+/// with the weights `w` of [`ShapeGeometry::bounding_ellipsoid_weights`]. Every point of the
+/// shape does, so a point outside either is outside the shape. Branch-free, so that it
+/// vectorises inside a loop over points.
+#[inline(always)]
+pub fn within_bounds(p: Vec3, extent: Vec3, weights: Vec3) -> bool {
+    let in_box = (p.x.abs() <= extent.x) & (p.y.abs() <= extent.y) & (p.z.abs() <= extent.z);
+    in_box & (p.x * p.x * weights.x + p.y * p.y * weights.y + p.z * p.z * weights.z <= 1.0)
+}
+
 /// Smallest and largest superellipsoid exponent accepted (beyond 2 the surface has cusps where
 /// the gradient is infinite).
 pub const SUPERELLIPSOID_EXPONENT_RANGE: (f32, f32) = (0.1, 2.0);

@@ -43,7 +43,9 @@ use super::forces;
 use super::kernels::Batch;
 use super::masks::collect_hits;
 use super::moves::MoveBatch;
-use crate::character::{PROJECTION_TOLERANCE_M, Primitive, ShapeGeometry, ShapeInstance};
+use crate::character::{
+    PROJECTION_TOLERANCE_M, Primitive, ShapeGeometry, ShapeInstance, within_bounds,
+};
 
 /// Rounds over the shapes in one pass (a point pushed into a neighbouring muscle is fixed in
 /// the next round).
@@ -1268,8 +1270,9 @@ crate::sim::simd::multiversion! {
 }
 
 /// Whether the world point `q`, mapped by `shape_from_world` to `p`, lies in the box
-/// `|p| ≤ extent` and the ellipsoid `Σ p_j² w_j ≤ 1`: the test of [`box_filter`] (inlined into
-/// each of its copies, branch-free) and of [`Filter::contains`], with the same arithmetic.
+/// `|p| ≤ extent` and the ellipsoid `Σ p_j² w_j ≤ 1` ([`within_bounds`]): the test of
+/// [`box_filter`] (inlined into each of its copies, branch-free) and of [`Filter::contains`],
+/// with the same arithmetic.
 #[inline(always)]
 fn in_box_and_ellipsoid(shape_from_world: &Affine3A, extent: Vec3, w: Vec3, q: [f32; 3]) -> bool {
     let m = shape_from_world.matrix3;
@@ -1277,8 +1280,7 @@ fn in_box_and_ellipsoid(shape_from_world: &Affine3A, extent: Vec3, w: Vec3, q: [
     let lx = cx.x * q[0] + cy.x * q[1] + cz.x * q[2] + o.x;
     let ly = cx.y * q[0] + cy.y * q[1] + cz.y * q[2] + o.y;
     let lz = cx.z * q[0] + cy.z * q[1] + cz.z * q[2] + o.z;
-    let in_box = (lx.abs() <= extent.x) & (ly.abs() <= extent.y) & (lz.abs() <= extent.z);
-    in_box & (lx * lx * w.x + ly * ly * w.y + lz * lz * w.z <= 1.0)
+    within_bounds(Vec3::new(lx, ly, lz), extent, w)
 }
 
 /// Outward unit normal of a shape at a surface point, world.
