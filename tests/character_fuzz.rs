@@ -9,7 +9,8 @@ use std::path::Path;
 use leman::character::{Character, Posture, examples};
 use leman::sim::surface::SurfaceModel;
 use leman::sim::{
-    DeformationModel, FixedPosture, IntegratorKind, MaxAttempts, MotionPoses, PoseSource,
+    AdvanceEnd, DeformationModel, FixedPosture, IntegratorKind, MaxAttempts, MotionPoses,
+    PoseSource,
 };
 use proptest::prelude::*;
 
@@ -187,7 +188,13 @@ fn load_and_run(bytes: &[u8], dir: &Path, kind: IntegratorKind) -> Result<(), Te
         Some(p) => p,
         None => &mut fixed,
     };
-    model.advance(0.05, poses, &mut MaxAttempts(60), None);
+    let report = model.advance(0.05, poses, &mut MaxAttempts(300), None);
+    // Either it gets somewhere or it says it cannot: 300 attempts without a step and without
+    // the guard giving up is a retry loop that would hang `leman simulate`.
+    prop_assert!(
+        report.end != AdvanceEnd::BudgetSpent || report.steps > 0,
+        "attempts without progress: {report:?}"
+    );
     for p in model.positions_m() {
         prop_assert!(
             p.is_finite(),

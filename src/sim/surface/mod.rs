@@ -661,6 +661,15 @@ impl SurfaceModel {
         report.force_evals += u64::from(p.position_evals);
         report.velocity_evals += u64::from(p.velocity_evals);
         if !p.accepted {
+            // At the smallest step the integrator accepts any finite error, so a rejection
+            // there means the error estimate itself is not finite (a state far outside the
+            // model's range: a skin point a light-year away overflows the scaled error). A
+            // fixed-step method rejects only on a bug. Retrying either would repeat the same
+            // attempt forever; the guard counts it and gives up after `GUARD_ATTEMPTS`.
+            let at_min = h_s <= core.tolerances.min_step_s * (1.0 + 1e-9);
+            if at_min || !core.kind.is_adaptive() {
+                return Attempt::NonFinite;
+            }
             return Attempt::ErrorRejected {
                 next_s: p.next_step_s,
             };

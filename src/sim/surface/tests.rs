@@ -203,6 +203,27 @@ fn a_character_whose_forces_explode_stalls_and_says_so() {
     assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{r:?}");
 }
 
+/// A skin point so far away (finite, but 10³⁰ m) that the error estimate overflows: no step
+/// size helps, so the guard gives up instead of retrying the smallest step forever (it did,
+/// found by `tests/character_fuzz.rs`'s kind of damage through `leman simulate`).
+#[test]
+fn an_error_estimate_that_overflows_stalls_instead_of_looping() {
+    let mut c = examples::build("wombat", 8, 6).expect("example exists");
+    let far = c.skin.around as usize * 2 + 3;
+    c.skin.positions_m[far].x = 1e30;
+    let mut m = SurfaceModel::new(c, IntegratorKind::Verlet).expect("it builds");
+    let mut poses = FixedPosture(Posture::neutral(&m.character().skeleton));
+    // Land exactly on the smallest step, and on less than it, as `leman simulate` does.
+    let min = m.core.tolerances.min_step_s;
+    for target in [min, 0.5 * min, 0.05] {
+        let r = m.advance(target, &mut poses, &mut MaxAttempts(1000), None);
+        assert_eq!(r.end, AdvanceEnd::Stalled, "target {target} s: {r:?}");
+        assert_eq!(r.steps, 0, "{r:?}");
+        assert!(r.rejected_steps < 100, "gave up quickly: {r:?}");
+        assert!(all_finite(&m));
+    }
+}
+
 /// Slider extremes that make the torso run for a while on 10 ms Euler steps and then blow up
 /// at every step size.
 const EXPLODING_TORSO: &[ParameterChange] = &[
