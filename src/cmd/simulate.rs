@@ -472,10 +472,19 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         "{:<28}{} mass points ({}×{})",
         "Skin mesh", r.skin_points, r.resolution[0], r.resolution[1]
     )?;
+    let count =
+        |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
     writeln!(
         out,
-        "{:<28}{} spheres, {} superellipsoids, {} cylinders",
-        "Muscle layer", r.muscles.spheres, r.muscles.superellipsoids, r.muscles.cylinders
+        "{:<28}{}, {}, {}",
+        "Muscle layer",
+        count(r.muscles.spheres, "sphere", "spheres"),
+        count(
+            r.muscles.superellipsoids,
+            "superellipsoid",
+            "superellipsoids"
+        ),
+        count(r.muscles.cylinders, "cylinder", "cylinders"),
     )?;
     writeln!(
         out,
