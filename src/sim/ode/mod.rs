@@ -177,6 +177,68 @@ pub struct Tolerances {
     pub max_shrink: f64,
 }
 
+/// The most velocity iterations per Verlet step [`Tolerances::check`] allows (the default is 8;
+/// the iteration converges linearly, so more than this means it will not).
+pub const MAX_VELOCITY_ITERATIONS: u32 = 1000;
+
+impl Tolerances {
+    /// Whether every value is in its range, or the first that is not, named: the steps,
+    /// tolerances and thresholds finite and positive with `max_step_s ≥ min_step_s`, the
+    /// safety factor in (0, 1], the largest shrink of a step in (0, 1) and the largest growth
+    /// at least 1 (so a rejected step always shrinks and the controller's clamp is well formed),
+    /// and the velocity iterations in `1..=MAX_VELOCITY_ITERATIONS` (each is a force
+    /// evaluation, and an attempt must end).
+    pub fn check(&self) -> Result<(), String> {
+        for (name, v) in [
+            ("fixed_step_s", self.fixed_step_s),
+            ("min_step_s", self.min_step_s),
+            ("max_step_s", self.max_step_s),
+            ("position_tolerance", self.position_tolerance),
+            ("velocity_tolerance", self.velocity_tolerance),
+            ("position_threshold_m", self.position_threshold_m),
+            (
+                "velocity_threshold_m_per_s",
+                self.velocity_threshold_m_per_s,
+            ),
+            ("safety", self.safety),
+            ("max_growth", self.max_growth),
+            ("max_shrink", self.max_shrink),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be finite and > 0, got {v}"));
+            }
+        }
+        if self.max_step_s < self.min_step_s {
+            return Err(format!(
+                "max_step_s {} is below min_step_s {}",
+                self.max_step_s, self.min_step_s
+            ));
+        }
+        if self.safety > 1.0 {
+            return Err(format!("safety must be at most 1, got {}", self.safety));
+        }
+        if self.max_shrink >= 1.0 {
+            return Err(format!(
+                "max_shrink must be below 1, got {}",
+                self.max_shrink
+            ));
+        }
+        if self.max_growth < 1.0 {
+            return Err(format!(
+                "max_growth must be at least 1, got {}",
+                self.max_growth
+            ));
+        }
+        if !(1..=MAX_VELOCITY_ITERATIONS).contains(&self.max_velocity_iterations) {
+            return Err(format!(
+                "max_velocity_iterations must be in 1..={MAX_VELOCITY_ITERATIONS}, got {}",
+                self.max_velocity_iterations
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for Tolerances {
     fn default() -> Self {
         Self {

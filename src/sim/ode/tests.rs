@@ -511,3 +511,35 @@ fn contact_aware_error_drops_only_the_inward_part() {
         );
     }
 }
+
+#[test]
+fn tolerances_out_of_range_are_named() {
+    assert_eq!(Tolerances::default().check(), Ok(()));
+    type Spoil = fn(&mut Tolerances);
+    let cases: [(Spoil, &str); 10] = [
+        (|t| t.min_step_s = 0.0, "min_step_s"),
+        (|t| t.position_tolerance = f64::NAN, "position_tolerance"),
+        (|t| t.fixed_step_s = f64::INFINITY, "fixed_step_s"),
+        (|t| t.max_step_s = 1e-5, "below min_step_s"),
+        (|t| t.safety = 1.5, "safety"),
+        (|t| t.max_shrink = 1.0, "max_shrink"),
+        // Growth below shrink made the controller's clamp panic before this check.
+        (
+            |t| (t.max_growth, t.max_shrink) = (1e-30, 1e-8),
+            "max_growth",
+        ),
+        (|t| t.max_growth = -2.0, "max_growth"),
+        // u32::MAX iterations kept an attempt running for hours.
+        (
+            |t| t.max_velocity_iterations = u32::MAX,
+            "max_velocity_iterations",
+        ),
+        (|t| t.max_velocity_iterations = 0, "max_velocity_iterations"),
+    ];
+    for (spoil, name) in cases {
+        let mut t = Tolerances::default();
+        spoil(&mut t);
+        let err = t.check().expect_err(name);
+        assert!(err.contains(name), "{name}: {err}");
+    }
+}

@@ -563,27 +563,7 @@ impl SurfaceModel {
                 core.step_s = initial_step(*kind, &core.tolerances);
             }
             ParameterChange::Tolerances(t) => {
-                let vals = [
-                    ("fixed_step_s", t.fixed_step_s),
-                    ("min_step_s", t.min_step_s),
-                    ("max_step_s", t.max_step_s),
-                    ("position_tolerance", t.position_tolerance),
-                    ("velocity_tolerance", t.velocity_tolerance),
-                    ("position_threshold_m", t.position_threshold_m),
-                    ("velocity_threshold_m_per_s", t.velocity_threshold_m_per_s),
-                    ("safety", t.safety),
-                    ("max_growth", t.max_growth),
-                    ("max_shrink", t.max_shrink),
-                ];
-                for (name, v) in vals {
-                    check_value(name, v as f32, true)?;
-                }
-                if t.max_step_s < t.min_step_s {
-                    return Err(SimError::BadParameter(format!(
-                        "max_step_s {} is below min_step_s {}",
-                        t.max_step_s, t.min_step_s
-                    )));
-                }
+                t.check().map_err(SimError::BadParameter)?;
                 core.tolerances = *t;
                 core.step_s = initial_step(core.kind, t);
             }
