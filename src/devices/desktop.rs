@@ -87,6 +87,39 @@ impl Default for DesktopSettings {
     }
 }
 
+impl DesktopSettings {
+    /// The first setting out of range, as its field name and what is wrong: every value must
+    /// be finite, the wand area positive and the wheel step not negative (a NaN here would
+    /// reach the wand pose, and a NaN depth range the wheel's clamp).
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        let finite = |name: &'static str, values: &[f32]| {
+            if values.iter().all(|v| v.is_finite()) {
+                Ok(())
+            } else {
+                Err((name, format!("{values:?} is not finite")))
+            }
+        };
+        finite("head_position_m", &self.head_position_m)?;
+        finite("wand_area_m", &self.wand_area_m)?;
+        finite("wand_depth_m", &[self.wand_depth_m])?;
+        finite("wheel_step_m", &[self.wheel_step_m])?;
+        finite("wand_depth_range_m", &self.wand_depth_range_m)?;
+        if self.wand_area_m.iter().any(|v| *v <= 0.0) {
+            return Err((
+                "wand_area_m",
+                format!("{:?} must be positive", self.wand_area_m),
+            ));
+        }
+        if self.wheel_step_m < 0.0 {
+            return Err((
+                "wheel_step_m",
+                format!("{} must not be negative", self.wheel_step_m),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Station number of the stand-in head pose.
 pub const HEAD_STATION: u8 = 1;
 /// Station number of the stand-in wand pose.

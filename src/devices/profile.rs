@@ -587,6 +587,9 @@ impl Profile {
             {
                 return Err(bad(f("decoder"), e.to_string()));
             }
+            if let Err((name, message)) = d.desktop.check() {
+                return Err(bad(f(&format!("desktop.{name}")), message));
+            }
             let s = &d.driver;
             for (name, v) in [
                 ("init_timeout_s", s.init_timeout_s),
@@ -780,6 +783,14 @@ map.rz = { dead_zone = 0.1 }
         let typo = GOOD.replace("station = 1", "statoin = 1");
         let e = parse(&typo).expect_err("unknown field").to_string();
         assert!(e.contains("statoin"), "{e}");
+
+        // A NaN in the desktop stand-ins' settings would reach the wand pose (found by
+        // tests/profile_fuzz.rs); the field is named.
+        let mut desktop = Profile::desktop_default();
+        desktop.devices[0].desktop.wand_area_m[0] = f32::NAN;
+        let text = desktop.to_toml().expect("serialises");
+        let e = parse(&text).expect_err("NaN wand area").to_string();
+        assert!(e.contains("device[0].desktop.wand_area_m"), "{e}");
 
         let e = Profile::load(Path::new("/no/such/profile.toml"))
             .expect_err("missing file")
