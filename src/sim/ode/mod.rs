@@ -183,7 +183,7 @@ pub const MAX_VELOCITY_ITERATIONS: u32 = 1000;
 
 impl Tolerances {
     /// Whether every value is in its range, or the first that is not, named: the steps,
-    /// tolerances and thresholds finite and positive with `max_step_s ≥ min_step_s`, the
+    /// tolerances and thresholds finite and positive (in `f32`, as the simulator uses them) with `max_step_s ≥ min_step_s`, the
     /// safety factor in (0, 1], the largest shrink of a step in (0, 1) and the largest growth
     /// at least 1 (so a rejected step always shrinks and the controller's clamp is well formed),
     /// and the velocity iterations in `1..=MAX_VELOCITY_ITERATIONS` (each is a force
@@ -204,8 +204,12 @@ impl Tolerances {
             ("max_growth", self.max_growth),
             ("max_shrink", self.max_shrink),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} must be finite and > 0, got {v}"));
+            // The skin is simulated in single precision: the value must survive the cast.
+            let single = v as f32;
+            if !(single.is_finite() && single > 0.0) {
+                return Err(format!(
+                    "{name} must be finite and > 0 in single precision, got {v}"
+                ));
             }
         }
         if self.max_step_s < self.min_step_s {

@@ -516,8 +516,11 @@ fn contact_aware_error_drops_only_the_inward_part() {
 fn tolerances_out_of_range_are_named() {
     assert_eq!(Tolerances::default().check(), Ok(()));
     type Spoil = fn(&mut Tolerances);
-    let cases: [(Spoil, &str); 10] = [
+    let cases: [(Spoil, &str); 12] = [
         (|t| t.min_step_s = 0.0, "min_step_s"),
+        // Finite in f64 but not in the simulator's f32.
+        (|t| t.max_step_s = 1e300, "max_step_s"),
+        (|t| t.velocity_tolerance = 1e-300, "velocity_tolerance"),
         (|t| t.position_tolerance = f64::NAN, "position_tolerance"),
         (|t| t.fixed_step_s = f64::INFINITY, "fixed_step_s"),
         (|t| t.max_step_s = 1e-5, "below min_step_s"),
