@@ -15,7 +15,7 @@ use leman::sim::{
 use proptest::prelude::*;
 
 mod common;
-use common::damage::{apply, damage, find, number_spans};
+use common::damage::{damage, damaged, find, number_spans};
 
 /// The text of a small saved example: an 8×6 wombat has every kind of shape, deformations tied
 /// to joints, tissue springs and a motion, and simulates in milliseconds.
@@ -102,10 +102,7 @@ proptest! {
             Just(IntegratorKind::Rk4),
         ],
     ) {
-        let mut bytes = original();
-        for d in &damages {
-            apply(&mut bytes, d, b"\n[skin]");
-        }
+        let bytes = damaged(original(), &damages, b"\n[skin]");
         let dir = tempfile::tempdir().expect("tempdir");
         load_and_run(&bytes, dir.path(), kind)?;
     }

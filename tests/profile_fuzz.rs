@@ -11,7 +11,7 @@ use leman::stereo::view::{ViewSettings, eye_views};
 use proptest::prelude::*;
 
 mod common;
-use common::damage::{apply, damage};
+use common::damage::{damage, damaged};
 
 /// Profiles have no bulk data: every number is a setting.
 const NO_BULK: &[u8] = b"\0";
@@ -50,10 +50,7 @@ proptest! {
     fn damaged_calibration_profiles_are_refused_or_give_finite_views(
         damages in prop::collection::vec(damage(), 1..4),
     ) {
-        let mut bytes = calibration_text();
-        for d in &damages {
-            apply(&mut bytes, d, NO_BULK);
-        }
+        let bytes = damaged(calibration_text(), &damages, NO_BULK);
         let dir = tempfile::tempdir().expect("tempdir");
         let path = write(dir.path(), "damaged_calibration.toml", &bytes);
         match CalibrationProfile::load(&path) {
@@ -78,10 +75,7 @@ proptest! {
     fn damaged_device_profiles_are_refused_or_round_trip(
         damages in prop::collection::vec(damage(), 1..4),
     ) {
-        let mut bytes = devices_text();
-        for d in &damages {
-            apply(&mut bytes, d, NO_BULK);
-        }
+        let bytes = damaged(devices_text(), &damages, NO_BULK);
         let dir = tempfile::tempdir().expect("tempdir");
         let path = write(dir.path(), "damaged_devices.toml", &bytes);
         match Profile::load(&path) {

@@ -139,3 +139,11 @@ pub fn apply(text: &mut Vec<u8>, d: &Damage, bulk: &[u8]) {
         }
     }
 }
+
+/// `text` with every damage in `damages` applied in turn (`bulk` as for [`apply`]).
+pub fn damaged(mut text: Vec<u8>, damages: &[Damage], bulk: &[u8]) -> Vec<u8> {
+    for d in damages {
+        apply(&mut text, d, bulk);
+    }
+    text
+}
