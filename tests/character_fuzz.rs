@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use leman::character::{Character, Posture, examples};
+use leman::character::{Character, Motion, Posture, examples};
 use leman::sim::surface::SurfaceModel;
 use leman::sim::{
     AdvanceEnd, DeformationModel, FixedPosture, IntegratorKind, MaxAttempts, MotionPoses,
@@ -25,8 +25,15 @@ fn original() -> Vec<u8> {
 }
 
 /// Loads `bytes` through a file, as a user's file would be; what loads must survive a save
-/// and load unchanged, and is run with `kind`.
-fn load_and_run(bytes: &[u8], dir: &Path, kind: IntegratorKind) -> Result<(), TestCaseError> {
+/// and load unchanged, is run with `kind`, and is run again after a change of resolution to
+/// `resolution`, both as `leman simulate --resolution` makes it (a resampled character) and
+/// as the workstation does (the running model resampled).
+fn load_and_run(
+    bytes: &[u8],
+    dir: &Path,
+    kind: IntegratorKind,
+    resolution: (u32, u32),
+) -> Result<(), TestCaseError> {
     let path = dir.join("damaged.toml");
     std::fs::write(&path, bytes).expect("write the damaged file");
     let character = match Character::load(&path) {
@@ -46,18 +53,41 @@ fn load_and_run(bytes: &[u8], dir: &Path, kind: IntegratorKind) -> Result<(), Te
     }
     let motion = character.motions.first().cloned();
     let neutral = Posture::neutral(&character.skeleton);
+    let (around, along) = resolution;
+    // As `leman simulate --resolution` makes it: a resampled character (or an error).
+    if let Ok(resampled) = character.with_resolution(around, along)
+        && let Ok(mut model) = SurfaceModel::new(resampled, kind)
+    {
+        run_until(&mut model, 0.03, motion.as_ref(), &neutral)?;
+    }
     let Ok(mut model) = SurfaceModel::new(character, kind) else {
         return Ok(());
     };
-    let mut fixed = FixedPosture(neutral);
-    let mut playing = motion.as_ref().map(MotionPoses);
+    run_until(&mut model, 0.05, motion.as_ref(), &neutral)?;
+    // As the workstation does: the running model resampled (or an error).
+    if model.set_resolution(around, along).is_ok() {
+        run_until(&mut model, 0.08, motion.as_ref(), &neutral)?;
+    }
+    Ok(())
+}
+
+/// Advances `model` to `time_s` playing `motion` (or holding `neutral`): it must get somewhere
+/// or say it cannot, and no non-finite position may come out.
+fn run_until(
+    model: &mut SurfaceModel,
+    time_s: f64,
+    motion: Option<&Motion>,
+    neutral: &Posture,
+) -> Result<(), TestCaseError> {
+    let mut fixed = FixedPosture(neutral.clone());
+    let mut playing = motion.map(MotionPoses);
     let poses: &mut dyn PoseSource = match playing.as_mut() {
         Some(p) => p,
         None => &mut fixed,
     };
-    let report = model.advance(0.05, poses, &mut MaxAttempts(300), None);
-    // Either it gets somewhere or it says it cannot: 300 attempts without a step and without
-    // the guard giving up is a retry loop that would hang `leman simulate`.
+    let report = model.advance(time_s, poses, &mut MaxAttempts(300), None);
+    // 300 attempts without a step and without the guard giving up is a retry loop that would
+    // hang `leman simulate`.
     prop_assert!(
         report.end != AdvanceEnd::BudgetSpent || report.steps > 0,
         "attempts without progress: {report:?}"
@@ -101,9 +131,10 @@ proptest! {
             Just(IntegratorKind::Rk2),
             Just(IntegratorKind::Rk4),
         ],
+        resolution in (prop_oneof![0u32..3, 3u32..24], prop_oneof![0u32..3, 3u32..24]),
     ) {
         let bytes = damaged(original(), &damages, b"\n[skin]");
         let dir = tempfile::tempdir().expect("tempdir");
-        load_and_run(&bytes, dir.path(), kind)?;
+        load_and_run(&bytes, dir.path(), kind, resolution)?;
     }
 }
