@@ -1,7 +1,8 @@
-//! Parameter changes from the workstation's panels, sliders and scripts, with hostile values:
-//! each is applied between short advances of a small running character and must either be
-//! refused as a bad parameter or taken; whatever is taken, the simulator
-//! never panics, never lets a non-finite position out, and never spins without progress.
+//! What the workstation does to a running model between frames, with hostile values: parameter
+//! changes from its panels, sliders and scripts (each must be refused as a bad parameter or
+//! taken), resolution changes (taken exactly when valid) and snapshots restored after an
+//! advance (the same time and skin again). Whatever is taken, the simulator never panics,
+//! never lets a non-finite position out, and never spins without progress.
 
 use leman::character::{Posture, Sym2, examples};
 use leman::sim::surface::SurfaceModel;
@@ -103,32 +104,74 @@ fn change() -> impl Strategy<Value = ParameterChange> {
     ]
 }
 
+/// What the workstation does to a running model between frames.
+#[derive(Debug, Clone)]
+enum Action {
+    /// A panel, slider or script change.
+    Change(ParameterChange),
+    /// The skin resolution changed (`--adapt` or the panel), possibly to an invalid one.
+    Resolution(u32, u32),
+    /// A snapshot taken now, and restored after the next advance (undo, or a replayed edit).
+    SnapshotThenRestore,
+}
+
+fn action() -> impl Strategy<Value = Action> {
+    prop_oneof![
+        8 => change().prop_map(Action::Change),
+        1 => (0u32..20, 0u32..20).prop_map(|(a, b)| Action::Resolution(a, b)),
+        1 => Just(Action::SnapshotThenRestore),
+    ]
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(500))]
 
     #[test]
-    fn hostile_parameter_changes_are_refused_or_run_finite(
-        changes in prop::collection::vec(change(), 1..6),
+    fn hostile_workstation_actions_are_refused_or_run_finite(
+        actions in prop::collection::vec(action(), 1..6),
     ) {
         let c = examples::build("wombat", 8, 6).expect("the wombat example");
         let neutral = Posture::neutral(&c.skeleton);
         let mut model = SurfaceModel::new(c, IntegratorKind::Verlet).expect("it simulates");
         let mut poses = FixedPosture(neutral);
         let mut target = 0.0;
-        for change in &changes {
-            match model.apply(change) {
-                Ok(()) => {}
-                Err(SimError::BadParameter(message)) => prop_assert!(!message.is_empty()),
-                Err(other) => prop_assert!(false, "{change:?}: not a bad-parameter error: {other}"),
+        for action in &actions {
+            let mut restore = None;
+            match action {
+                Action::Change(change) => match model.apply(change) {
+                    Ok(()) => {}
+                    Err(SimError::BadParameter(message)) => prop_assert!(!message.is_empty()),
+                    Err(other) => {
+                        prop_assert!(false, "{change:?}: not a bad-parameter error: {other}")
+                    }
+                },
+                Action::Resolution(around, along) => {
+                    let valid = (3..=1024).contains(around) && (3..=1024).contains(along);
+                    let result = model.set_resolution(*around, *along);
+                    prop_assert_eq!(result.is_ok(), valid, "{:?}", result);
+                    if valid {
+                        prop_assert_eq!(model.resolution(), (*around, *along));
+                    }
+                }
+                Action::SnapshotThenRestore => {
+                    restore = Some((model.snapshot(), model.time_s(), model.positions_m()));
+                }
             }
             target += 0.01;
             let report = model.advance(target, &mut poses, &mut MaxAttempts(300), None);
             prop_assert!(
                 report.end != AdvanceEnd::BudgetSpent || report.steps > 0,
-                "after {change:?}: attempts without progress: {report:?}"
+                "after {action:?}: attempts without progress: {report:?}"
             );
             for p in model.positions_m() {
-                prop_assert!(p.is_finite(), "after {change:?}: a non-finite position");
+                prop_assert!(p.is_finite(), "after {action:?}: a non-finite position");
+            }
+            if let Some((snapshot, time_s, positions)) = restore {
+                let restored = model.restore(&snapshot);
+                prop_assert!(restored.is_ok(), "{:?}", restored.err());
+                prop_assert_eq!(model.time_s(), time_s);
+                prop_assert!(model.positions_m() == positions, "the restored skin differs");
+                target = time_s;
             }
         }
     }
