@@ -120,7 +120,7 @@ fn the_undamaged_file_loads_and_runs() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(500))]
+    #![proptest_config(ProptestConfig::with_cases(common::cases_or(500)))]
 
     #[test]
     fn damaged_character_files_are_refused_or_run_finite(

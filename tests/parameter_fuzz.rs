@@ -12,6 +12,8 @@ use leman::sim::{
 };
 use proptest::prelude::*;
 
+mod common;
+
 /// Values that break naive code, and ordinary ones so that some changes are taken.
 fn value() -> impl Strategy<Value = f32> {
     prop_oneof![
@@ -124,7 +126,7 @@ fn action() -> impl Strategy<Value = Action> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(500))]
+    #![proptest_config(ProptestConfig::with_cases(common::cases_or(500)))]
 
     #[test]
     fn hostile_workstation_actions_are_refused_or_run_finite(

@@ -44,7 +44,7 @@ fn the_undamaged_profiles_load() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(400))]
+    #![proptest_config(ProptestConfig::with_cases(common::cases_or(400)))]
 
     #[test]
     fn damaged_calibration_profiles_are_refused_or_give_finite_views(
