@@ -606,6 +606,37 @@ mod tests {
         }
     }
 
+    /// k∥ and k⊥ are fractions of a velocity component: [0, 1], refused outside it by name.
+    #[test]
+    fn contact_velocity_fractions_are_checked() {
+        let text = arm_text();
+        assert!(text.contains("k_perpendicular = 1.0\n"), "saved: {text}");
+        for (field, bad, says) in [
+            (
+                "k_perpendicular = 1.0",
+                "k_perpendicular = 1e30",
+                "k_perpendicular must be in [0, 1], got 1000000000000000000000000000000",
+            ),
+            (
+                "k_perpendicular = 1.0",
+                "k_perpendicular = 1.01",
+                "k_perpendicular must be in [0, 1], got 1.01",
+            ),
+            (
+                "k_parallel = 0.0",
+                "k_parallel = 2",
+                "k_parallel must be in [0, 1], got 2",
+            ),
+        ] {
+            let m = load_error(&text.replace(field, bad));
+            assert!(m.contains(says), "{bad}: {m}");
+        }
+        let fine = text
+            .replace("k_parallel = 0.0", "k_parallel = 1.0")
+            .replace("k_perpendicular = 1.0", "k_perpendicular = 0.0");
+        Character::from_toml_str(&fine, Path::new("k.toml")).expect("the ends of [0, 1] are fine");
+    }
+
     /// Holding resting skin is optional (files written before it existed load with it on),
     /// written on save, and must be a boolean.
     #[test]

@@ -95,6 +95,14 @@ pub fn is_recheck_fraction(f: f32) -> bool {
     f > 0.0 && f <= 1.0
 }
 
+/// Whether `k` can be eq. 13d's k∥ or k⊥: a fraction of a velocity component, in [0, 1] (NaN is
+/// not). Above 1 a contact would add energy (k⊥ = 10³⁰ made the tangential velocity infinite
+/// after the guard had passed the step). The one rule the file and the simulator's parameter
+/// change check.
+pub fn is_velocity_fraction(k: f32) -> bool {
+    (0.0..=1.0).contains(&k)
+}
+
 impl Default for SimulationDefaults {
     fn default() -> Self {
         Self {
@@ -149,6 +157,14 @@ impl SimulationDefaults {
         ] {
             if v <= 0.0 {
                 return Err(format!("simulation: {name} must be > 0, got {v}"));
+            }
+        }
+        for (name, k) in [
+            ("k_parallel", self.k_parallel),
+            ("k_perpendicular", self.k_perpendicular),
+        ] {
+            if !is_velocity_fraction(k) {
+                return Err(format!("simulation: {name} must be in [0, 1], got {k}"));
             }
         }
         if !is_recheck_fraction(self.recheck_fraction) {

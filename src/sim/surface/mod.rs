@@ -533,8 +533,16 @@ impl SurfaceModel {
                 k_parallel,
                 k_perpendicular,
             } => {
-                check_value("k_parallel", *k_parallel, false)?;
-                check_value("k_perpendicular", *k_perpendicular, false)?;
+                for (name, k) in [
+                    ("k_parallel", k_parallel),
+                    ("k_perpendicular", k_perpendicular),
+                ] {
+                    if !crate::character::is_velocity_fraction(*k) {
+                        return Err(SimError::BadParameter(format!(
+                            "{name} {k} is not in [0, 1]"
+                        )));
+                    }
+                }
                 core.k_parallel = *k_parallel;
                 core.k_perpendicular = *k_perpendicular;
             }

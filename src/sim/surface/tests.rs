@@ -224,6 +224,28 @@ fn an_error_estimate_that_overflows_stalls_instead_of_looping() {
     }
 }
 
+/// k⊥ = 10³⁰ passed the old check (finite, not negative) and made eq. 13 write an infinite
+/// tangential velocity after the guard had passed the step (found by `tests/parameter_fuzz.rs`
+/// through a snapshot): k∥ and k⊥ are fractions, refused outside [0, 1].
+#[test]
+fn contact_fractions_outside_zero_one_are_refused() {
+    let mut m = model("penguin", 8, IntegratorKind::Verlet);
+    for (k_parallel, k_perpendicular) in [(0.0, 1e30), (0.0, 1.01), (-0.1, 1.0), (f32::NAN, 1.0)] {
+        let change = ParameterChange::Contact {
+            k_parallel,
+            k_perpendicular,
+        };
+        let err = m.apply(&change).expect_err("refused");
+        assert!(matches!(err, SimError::BadParameter(_)), "{err}");
+        assert!(err.to_string().contains("[0, 1]"), "{err}");
+    }
+    m.apply(&ParameterChange::Contact {
+        k_parallel: 1.0,
+        k_perpendicular: 0.0,
+    })
+    .expect("the ends are fine");
+}
+
 /// Slider extremes that make the torso run for a while on 10 ms Euler steps and then blow up
 /// at every step size.
 const EXPLODING_TORSO: &[ParameterChange] = &[
