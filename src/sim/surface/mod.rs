@@ -579,6 +579,15 @@ impl SurfaceModel {
         Ok(())
     }
 
+    /// Whether every position and velocity of the skin is finite.
+    fn state_is_finite(&self) -> bool {
+        self.core
+            .x
+            .iter()
+            .chain(&self.core.v)
+            .all(|v| v.is_finite())
+    }
+
     fn restore_checkpoint(&mut self) {
         if self.work.checkpoint_x.len() == self.core.x.len() {
             self.core.x.clone_from(&self.work.checkpoint_x);
@@ -1032,9 +1041,7 @@ impl DeformationModel for SurfaceModel {
     ) -> AdvanceReport {
         let begin = clock.map(|c| c.now());
         let mut report = AdvanceReport::default();
-        let bad_state = !(self.core.x.iter().all(|x| x.is_finite())
-            && self.core.v.iter().all(|x| x.is_finite()));
-        if bad_state {
+        if !self.state_is_finite() {
             report.nonfinite_events += 1;
             self.restore_checkpoint();
         }
@@ -1123,6 +1130,16 @@ impl DeformationModel for SurfaceModel {
         // Fixed-step methods return to their fixed step after a constraint-limited step.
         if !self.core.kind.is_adaptive() {
             self.core.step_s = self.core.tolerances.fixed_step_s;
+        }
+        // The guard scans each step before its constraint phase; the projection and eq. 13 run
+        // after it. A state they left non-finite (no valid parameters are known to do so since
+        // k∥ and k⊥ are kept in [0, 1]) must not outlive the call, where positions, snapshots
+        // and the checkpoint would carry it: back to the call's start, and say it stalled (the
+        // next call would repeat the same steps).
+        if !self.state_is_finite() {
+            report.nonfinite_events += 1;
+            self.restore_checkpoint();
+            stalled = true;
         }
         self.save_checkpoint();
         report.time_s = self.core.t_s;

@@ -246,6 +246,33 @@ fn contact_fractions_outside_zero_one_are_refused() {
     .expect("the ends are fine");
 }
 
+/// The safety net behind the parameter checks: a state the constraint phase leaves non-finite
+/// (here an infinite k⊥ set past the check, which makes eq. 13's tangential velocity infinite
+/// after the guard's scan) does not outlive the call. The call goes back to its start and says
+/// it stalled; positions and snapshots stay finite and restorable.
+#[test]
+fn a_state_left_non_finite_by_the_constraints_does_not_outlive_the_call() {
+    let (mut m, mut poses) = settled_at_rest("penguin");
+    let start_s = m.time_s();
+    let start = m.core.x.clone();
+    m.core.k_perpendicular = f32::INFINITY;
+    let r = m.advance(start_s + 0.1, &mut poses, &mut Unlimited, None);
+    assert_eq!(r.end, AdvanceEnd::Stalled, "{r:?}");
+    assert!(r.nonfinite_events >= 1, "{r:?}");
+    assert!(all_finite(&m));
+    assert_eq!(
+        (m.time_s(), &m.core.x),
+        (start_s, &start),
+        "back to the call's start"
+    );
+    let snapshot = m.snapshot();
+    m.restore(&snapshot).expect("a finite snapshot restores");
+    // With the fraction back in range the same call goes through.
+    m.core.k_perpendicular = 1.0;
+    let r = m.advance(start_s + 0.1, &mut poses, &mut Unlimited, None);
+    assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{r:?}");
+}
+
 /// Slider extremes that make the torso run for a while on 10 ms Euler steps and then blow up
 /// at every step size.
 const EXPLODING_TORSO: &[ParameterChange] = &[
