@@ -182,6 +182,12 @@ pub struct Tolerances {
 pub const MAX_VELOCITY_ITERATIONS: u32 = 1000;
 
 impl Tolerances {
+    /// Whether `step_s` is the smallest step (within rounding), where an adaptive method accepts
+    /// any finite error (counted as forced).
+    pub fn at_min_step(&self, step_s: f64) -> bool {
+        step_s <= self.min_step_s * (1.0 + 1e-9)
+    }
+
     /// Whether every value is in its range, or the first that is not, named: the steps,
     /// tolerances and thresholds finite and positive (in `f32`, as the simulator uses them) with `max_step_s ≥ min_step_s`, the
     /// safety factor in (0, 1], the largest shrink of a step in (0, 1) and the largest growth
@@ -395,7 +401,7 @@ impl Integrator {
         } else {
             t.max_shrink
         };
-        let at_min = step_s <= t.min_step_s * (1.0 + 1e-9);
+        let at_min = t.at_min_step(step_s);
         let ok = error_ratio.is_finite() && error_ratio <= 1.0;
         let accepted = ok || (at_min && error_ratio.is_finite());
         let next = (step_s * factor).clamp(t.min_step_s, t.max_step_s.max(t.min_step_s));
@@ -510,7 +516,7 @@ impl Integrator {
             // The fixed point did not settle: treat as a failed step and halve.
             let mut p = self.adapt(h64, f64::INFINITY, 1, velocity_evals);
             p.next_step_s = (0.5 * h64).max(tol.min_step_s);
-            if h64 <= tol.min_step_s * (1.0 + 1e-9) && ratio.is_finite() {
+            if tol.at_min_step(h64) && ratio.is_finite() {
                 p.accepted = true;
                 p.forced = true;
                 p.error_ratio = ratio;

@@ -659,13 +659,13 @@ impl SurfaceModel {
         report.phases.force += eval.force_time;
         report.force_evals += u64::from(p.position_evals);
         report.velocity_evals += u64::from(p.velocity_evals);
+        let at_min = core.tolerances.at_min_step(h_s);
         if !p.accepted {
             // At the smallest step the integrator accepts any finite error, so a rejection
             // there means the error estimate itself is not finite (a state far outside the
             // model's range: a skin point a light-year away overflows the scaled error). A
             // fixed-step method rejects only on a bug. Retrying either would repeat the same
             // attempt forever; the guard counts it and gives up after `GUARD_ATTEMPTS`.
-            let at_min = h_s <= core.tolerances.min_step_s * (1.0 + 1e-9);
             if at_min || !core.kind.is_adaptive() {
                 return Attempt::NonFinite;
             }
@@ -696,7 +696,6 @@ impl SurfaceModel {
         report.rechecked_points += u64::from(phase.rechecked_points);
         report.unsettled_phases += u64::from(phase.unsettled);
         let outcome = phase.outcome;
-        let at_min = h_s <= core.tolerances.min_step_s * (1.0 + 1e-9);
         // Root bracketing assumes the correction shrinks with the step. When a retry at half
         // the step or less still needs ≥ 70 % of the previous correction, the penetration does
         // not come from this step's motion (e.g. a neighbour's correction turned the normal
