@@ -432,10 +432,9 @@ impl SurfaceModel {
     /// change of the state from outside a step saves one (construction,
     /// [`DeformationModel::apply`], `restore`, `set_resolution`) and so does the end of each
     /// `advance`, so between calls the checkpoint is always the state and `advance` need not
-    /// save one at its start. (It did: with
-    /// `leman simulate`'s slices of 1/30 s that copy repeated the one at the end of the slice
-    /// before, about 85 kB of contacts on a 32×32 skin and 2 % of the torso's wall-clock
-    /// profile.)
+    /// save one at its start. (It did: with `leman simulate`'s slices of 1/30 s that copy
+    /// repeated the one at the end of the slice before, about 85 kB of contacts on a 32×32 skin
+    /// and 2 % of the torso's wall-clock profile.)
     fn save_checkpoint(&mut self) {
         if self.state_is_finite() {
             self.copy_checkpoint();
