@@ -637,6 +637,18 @@ mod tests {
         Character::from_toml_str(&fine, Path::new("k.toml")).expect("the ends of [0, 1] are fine");
     }
 
+    /// A zero error threshold loaded, then stalled every run (the scaled error of a coordinate at
+    /// exactly 0 is infinite): refused by name at load, as the simulator's tolerances are.
+    #[test]
+    fn zero_error_thresholds_are_refused() {
+        let text = arm_text();
+        for field in ["r_threshold_m", "v_threshold_m_per_s"] {
+            assert!(text.contains(&format!("{field} = 1.0\n")), "saved: {text}");
+            let m = load_error(&text.replace(&format!("{field} = 1.0"), &format!("{field} = 0.0")));
+            assert!(m.contains(&format!("{field} must be > 0, got 0")), "{m}");
+        }
+    }
+
     /// Holding resting skin is optional (files written before it existed load with it on),
     /// written on save, and must be a boolean.
     #[test]

@@ -148,10 +148,15 @@ impl SimulationDefaults {
                 ));
             }
         }
+        // The error scaling divides by max(|value|, threshold) (eq. 8), so a zero threshold
+        // makes the error of a coordinate at exactly 0 infinite and no step can be taken; the
+        // simulator's `Tolerances::check` refuses it too.
         for (name, v) in [
             ("epsilon_c_m", self.epsilon_c_m),
             ("epsilon_r", self.epsilon_r),
+            ("r_threshold_m", self.r_threshold_m),
             ("epsilon_v", self.epsilon_v),
+            ("v_threshold_m_per_s", self.v_threshold_m_per_s),
             ("min_step_s", self.min_step_s),
             ("euler_step_s", self.euler_step_s),
         ] {
