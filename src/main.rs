@@ -43,8 +43,9 @@ enum Command {
 }
 
 /// Runs the command; an error is printed as its message and its causes, one per line, with
-/// exit status 1. (Returning the error from `main` would print its `Debug` form, which adds a
-/// stack trace whenever `RUST_BACKTRACE` is set: noise under a message meant for the user.)
+/// exit status 1 (130 for a simulation stopped by Ctrl-C, the status a shell gives SIGINT).
+/// (Returning the error from `main` would print its `Debug` form, which adds a stack trace
+/// whenever `RUST_BACKTRACE` is set: noise under a message meant for the user.)
 fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
@@ -57,7 +58,11 @@ fn main() -> ExitCode {
                     eprintln!("    {i}: {cause}");
                 }
             }
-            ExitCode::FAILURE
+            if err.is::<cmd::simulate::Interrupted>() {
+                ExitCode::from(130)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

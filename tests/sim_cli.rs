@@ -52,6 +52,10 @@ fn simulate_prints_the_documented_json() {
         assert!(v[key].is_number(), "{key} missing in {v}");
     }
     assert_eq!(v["hold_contacts"], true, "the default");
+    assert!(
+        v["interrupted_at_s"].is_null(),
+        "not stopped by Ctrl-C: {v}"
+    );
     assert!((v["sim_seconds"].as_f64().expect("number") - 0.3).abs() < 1e-6);
     assert_eq!(v["skin_points"], 256);
     assert!(v["steps"].as_u64().expect("number") > 10);
@@ -366,4 +370,76 @@ fn simulate_hold_contacts_switches_the_resting_contact() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--hold-contacts"), "{err}");
+}
+
+/// Starts `leman simulate ARGS --json`, sends it SIGINT (as Ctrl-C does) after `after`, and
+/// returns its exit code, standard output and standard error.
+fn simulate_interrupted(
+    args: &[&str],
+    after: std::time::Duration,
+) -> (Option<i32>, String, String) {
+    let child = leman()
+        .arg("simulate")
+        .args(args)
+        .arg("--json")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("leman starts");
+    std::thread::sleep(after);
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(kill.success(), "kill -INT failed");
+    let out = child.wait_with_output().expect("leman ends");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Ctrl-C during a long run ends it at the next step: the report of the simulated part is
+/// still printed, and the exit status is the shell's 130 for SIGINT.
+#[test]
+fn simulate_stopped_by_ctrl_c_reports_what_it_simulated() {
+    // Two seconds: long past loading the character (milliseconds), far short of 10⁶ s.
+    let after = std::time::Duration::from_secs(2);
+    let (code, stdout, stderr) =
+        simulate_interrupted(&["penguin_16", "--seconds", "1000000"], after);
+    assert_eq!(code, Some(130), "{stdout}\n{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("interrupted by Ctrl-C at t = "), "{stderr}");
+    assert!(stderr.contains("of 1000000 s"), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    let at = v["interrupted_at_s"].as_f64().expect("a number");
+    assert!(at > 0.0 && at < 1e6, "{v}");
+    assert_eq!(v["sim_seconds"].as_f64(), Some(at), "{v}");
+    assert!(v["steps"].as_u64().expect("number") > 0, "{v}");
+    assert!(v["stalled_at_s"].is_null(), "{v}");
+    assert_eq!(v["repeats"], 1, "{v}");
+
+    // With --repeat, the runs completed before the press are reported, the cut one is not.
+    let (code, stdout, stderr) = simulate_interrupted(
+        &["penguin_16", "--seconds", "0.05", "--repeat", "1000000"],
+        after,
+    );
+    assert_eq!(code, Some(130), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("of --repeat 1000000; the report is of the "),
+        "{stderr}"
+    );
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    assert!(v["interrupted_at_s"].is_null(), "{v}");
+    assert!(
+        (v["sim_seconds"].as_f64().expect("number") - 0.05).abs() < 1e-9,
+        "{v}"
+    );
+    let repeats = v["repeats"].as_u64().expect("number");
+    assert!((1..1_000_000).contains(&repeats), "{v}");
+    assert!(
+        stderr.contains(&format!("the {repeats} complete run")),
+        "{stderr}"
+    );
 }

@@ -4,9 +4,12 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 use leman::character::{Character, Primitive};
@@ -14,7 +17,7 @@ use leman::clock::{Clock, RealClock};
 use leman::sim::surface::SurfaceModel;
 use leman::sim::{
     AdvanceEnd, AdvanceReport, DeformationModel, FixedPosture, IntegratorKind, MotionPoses,
-    PoseSource, Unlimited,
+    PoseSource,
 };
 
 /// Arguments of `leman simulate`.
@@ -138,6 +141,9 @@ struct Report {
     /// Simulated time at which the guard gave up (every attempt non-finite or exploding),
     /// seconds; `None` when the run reached its end.
     stalled_at_s: Option<f64>,
+    /// Simulated time at which Ctrl-C stopped the reported run, seconds; `None` when it was
+    /// not interrupted.
+    interrupted_at_s: Option<f64>,
     point_steps_per_second: f64,
 }
 
@@ -250,21 +256,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let name = character.name.clone();
+    let progress = progress_bar(seconds, args.repeat);
+    let stop = stop_on_ctrl_c(&progress)?;
     let mut runs = Vec::with_capacity(args.repeat as usize);
+    // The run (counted from 1) that Ctrl-C cut short, if any.
+    let mut interrupted_run = None;
     for k in 0..args.repeat {
+        if args.repeat > 1 {
+            progress.set_message(format!("run {} of {}", k + 1, args.repeat));
+        }
+        let done_ms = f64::from(k) * seconds * 1000.0;
         let run = run_once(
             character.clone(),
             kind,
             motion.as_ref(),
             seconds,
             args.sample_depth,
+            &stop,
+            &|t_s| progress.set_position((done_ms + t_s * 1000.0) as u64),
         )?;
+        if run.interrupted {
+            interrupted_run = Some(k + 1);
+            // A run cut short is reported only when no run is complete: otherwise the report
+            // is of the complete runs, which took the same steps.
+            if runs.is_empty() {
+                runs.push(run);
+            }
+            break;
+        }
         if let Some(first) = runs.first() {
             run.same_as(first)
                 .with_context(|| format!("run {} of --repeat {}", k + 1, args.repeat))?;
         }
         runs.push(run);
     }
+    progress.finish_and_clear();
     let walls: Vec<Duration> = runs.iter().map(|r| r.wall).collect();
     let run = &runs[median_index(&walls)];
     let (fastest, slowest) = (
@@ -287,7 +313,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         muscles,
         sim_seconds: sim_s,
         wall_seconds: wall_s,
-        repeats: args.repeat,
+        repeats: runs.len() as u32,
         wall_seconds_min: fastest.as_secs_f64(),
         wall_seconds_max: slowest.as_secs_f64(),
         slowdown: if sim_s > 0.0 {
@@ -328,6 +354,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         broadphase_rebuilds: model.broadphase_rebuilds(),
         nonfinite_events: total.nonfinite_events,
         stalled_at_s: (total.end == AdvanceEnd::Stalled).then_some(sim_s),
+        interrupted_at_s: run.interrupted.then_some(sim_s),
         point_steps_per_second: model.point_count() as f64 * total.steps as f64 / wall_s,
     };
     // Written, not printed: a closed pipe (`| head`) is an error message, not a panic.
@@ -347,7 +374,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             leman::sim::surface::GUARD_ATTEMPTS
         );
     }
+    if let Some(k) = interrupted_run {
+        let what = match report.interrupted_at_s {
+            Some(t) => {
+                format!("at t = {t:.4} s of {seconds} s; the report is of the simulated part")
+            }
+            None => format!(
+                "in run {k} of --repeat {}; the report is of the {} complete run{}",
+                args.repeat,
+                report.repeats,
+                if report.repeats == 1 { "" } else { "s" }
+            ),
+        };
+        return Err(Interrupted(format!("interrupted by Ctrl-C {what}")).into());
+    }
     Ok(())
+}
+
+/// A run stopped by Ctrl-C, after its report was printed. `main` exits with status 130, the
+/// shell's status for a command ended by SIGINT.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Interrupted(String);
+
+/// A progress bar on standard error over the simulated milliseconds of all the runs, hidden
+/// when standard error is not a terminal. It is moved between the timed slices only.
+fn progress_bar(seconds: f64, repeat: u32) -> ProgressBar {
+    // `as` saturates: `--seconds 1e300` gives a bar that never fills, not a panic.
+    let bar = ProgressBar::new((seconds * 1000.0 * f64::from(repeat)) as u64);
+    let style = ProgressStyle::with_template(
+        "{msg} [{wide_bar}] {pos}/{len} ms simulated, {elapsed} (Ctrl-C stops and reports)",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar());
+    bar.set_style(style);
+    bar
+}
+
+/// Installs the Ctrl-C handler: the first press sets the returned flag, which ends the run at
+/// its next step (the report of what was simulated is still printed); a second press quits at
+/// once with status 130.
+fn stop_on_ctrl_c(progress: &ProgressBar) -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let (flag, progress) = (Arc::clone(&stop), progress.clone());
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        progress.suspend(|| {
+            eprintln!("stopping at the next step (Ctrl-C again to quit at once)");
+        });
+    })
+    .context("cannot install the Ctrl-C handler")?;
+    Ok(stop)
 }
 
 /// Index of the median of `walls` (for an even count, the slower of the two middle ones, so
@@ -365,6 +443,8 @@ struct Run {
     wall: Duration,
     /// The deepest fat point inside any muscle after each 1/30 s slice, metres.
     depths_m: Vec<f32>,
+    /// Whether Ctrl-C ended the run before its last slice.
+    interrupted: bool,
 }
 
 impl Run {
@@ -400,13 +480,16 @@ impl Run {
 
 /// Runs `character` from its initial state through `motion` (the neutral posture if none) for
 /// `seconds` of simulated time in 1/30 s slices, as the app's frames would, with no wall-clock
-/// budget; the wall time is that of the simulation alone.
+/// budget; the wall time is that of the simulation alone. The run ends early, at the next step
+/// attempt, once `stop` is set; `progress` is told the simulated time after every slice.
 fn run_once(
     character: Character,
     kind: IntegratorKind,
     motion: Option<&leman::character::Motion>,
     seconds: f64,
     sample_depth: bool,
+    stop: &AtomicBool,
+    progress: &dyn Fn(f64),
 ) -> anyhow::Result<Run> {
     let neutral = leman::character::Posture::neutral(&character.skeleton);
     let mut model = SurfaceModel::new(character, kind)?;
@@ -422,17 +505,21 @@ fn run_once(
     let mut depths_m = Vec::new();
     let slice = 1.0 / 30.0;
     let mut target = 0.0f64;
+    let mut until_stopped = || !stop.load(Ordering::Relaxed);
+    let mut interrupted = false;
     while target < seconds {
         target = (target + slice).min(seconds);
         let start = clock.now();
-        let r = model.advance(target, poses, &mut Unlimited, Some(&clock));
+        let r = model.advance(target, poses, &mut until_stopped, Some(&clock));
         wall += clock.now().saturating_sub(start);
         total.merge(&r);
         if sample_depth {
             // Outside the timed part: a brute-force check of every point against every shape.
             depths_m.push(model.max_depth_m());
         }
+        progress(model.time_s());
         if !r.reached_target() {
+            interrupted = r.end == AdvanceEnd::BudgetSpent;
             break;
         }
     }
@@ -441,6 +528,7 @@ fn run_once(
         total,
         wall,
         depths_m,
+        interrupted,
     })
 }
 
@@ -593,6 +681,9 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
     writeln!(out, "{:<28}{}", "Non-finite events", r.nonfinite_events)?;
     if let Some(t) = r.stalled_at_s {
         writeln!(out, "{:<28}at {t:.4} s (the guard gave up)", "Stalled")?;
+    }
+    if let Some(t) = r.interrupted_at_s {
+        writeln!(out, "{:<28}at {t:.4} s (Ctrl-C)", "Interrupted")?;
     }
     write!(
         out,
