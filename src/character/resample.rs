@@ -127,9 +127,11 @@ impl Character {
                 "resolution must be at least 3×3, got {around}×{along}"
             )));
         }
-        if around > 4096 || along > 4096 {
+        let points = u64::from(around) * u64::from(along);
+        if points > Skin::MAX_POINTS {
             return Err(ValidationError(format!(
-                "resolution {around}×{along} is larger than 4096×4096"
+                "resolution {around}×{along} is {points} points, more than the {} (1024×1024) a skin may have",
+                Skin::MAX_POINTS
             )));
         }
         let old = &self.skin;
@@ -338,5 +340,23 @@ mod tests {
         let r = c.with_resolution(64, 64).expect("64x64");
         r.validate().expect("valid");
         assert!(c.with_resolution(2, 16).is_err());
+    }
+
+    #[test]
+    fn resolutions_over_the_point_limit_are_refused_by_name() {
+        let c = build("arm", 16, 16).expect("arm");
+        // 4096×256 is exactly the limit; one more row is over it.
+        assert_eq!(u64::from(4096u32 * 256), Skin::MAX_POINTS);
+        let err = c.with_resolution(4096, 257).expect_err("over the limit");
+        assert!(err.to_string().contains("4096×257"), "{err}");
+        assert!(err.to_string().contains("1048576"), "{err}");
+        // The product of two large sides must not wrap around in u32.
+        assert!(c.with_resolution(65536, 65536).is_err());
+        // A file's skin obeys the same limit.
+        let mut big = c.clone();
+        big.skin.around = 2048;
+        big.skin.along = 1024;
+        let err = big.validate().expect_err("over the limit");
+        assert!(err.to_string().contains("2048×1024"), "{err}");
     }
 }
