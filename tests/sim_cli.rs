@@ -443,3 +443,14 @@ fn simulate_stopped_by_ctrl_c_reports_what_it_simulated() {
         "{stderr}"
     );
 }
+
+/// The wombat's motion lasts 2.4 s, an f32 that reads as 2.40000009537 s: the run ends there
+/// without a sliver step for the last 95 ns (which also showed as the smallest step).
+#[test]
+fn simulate_ends_a_motion_without_a_sliver_step() {
+    let v = simulate_json(&["wombat_16"]);
+    let end = v["sim_seconds"].as_f64().expect("number");
+    assert!((end - 2.4).abs() < 1e-6, "{v}");
+    let min = v["step_secs"]["min"].as_f64().expect("number");
+    assert!(min > 1e-3, "a sliver step of {min} s: {v}");
+}
