@@ -63,9 +63,9 @@ pub struct Skin {
 
 impl Skin {
     /// Most points a skin may have (M·N), 1024×1024. The simulation takes about 0.9 kB per
-    /// point (900 MB at this size, measured on the torso), so a larger skin would abort on
-    /// an ordinary machine when allocating instead of failing with a message; at 20 M
-    /// point-steps per second it would also take seconds per step.
+    /// point (900 MB at this size, measured on the torso), so a much larger skin would abort
+    /// in the allocator on an ordinary machine instead of failing with a message; and at 20 M
+    /// point-steps per second a step of this size already takes 50 ms.
     pub const MAX_POINTS: u64 = 1 << 20;
 
     /// Number of points, M·N.
