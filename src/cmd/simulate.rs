@@ -415,14 +415,18 @@ fn progress_bar(seconds: f64, repeat: u32) -> ProgressBar {
 /// once with status 130.
 fn stop_on_ctrl_c(progress: &ProgressBar) -> anyhow::Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
-    let (flag, progress) = (Arc::clone(&stop), progress.clone());
+    // A weak handle: the handler outlives the run, and the bar must be dropped (which clears
+    // it) when `run` returns, error or not.
+    let (flag, progress) = (Arc::clone(&stop), progress.downgrade());
     ctrlc::set_handler(move || {
         if flag.swap(true, Ordering::SeqCst) {
             std::process::exit(130);
         }
-        progress.suspend(|| {
-            eprintln!("stopping at the next step (Ctrl-C again to quit at once)");
-        });
+        let say = || eprintln!("stopping at the next step (Ctrl-C again to quit at once)");
+        match progress.upgrade() {
+            Some(bar) => bar.suspend(say),
+            None => say(),
+        }
     })
     .context("cannot install the Ctrl-C handler")?;
     Ok(stop)
