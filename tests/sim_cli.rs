@@ -444,13 +444,20 @@ fn simulate_stopped_by_ctrl_c_reports_what_it_simulated() {
     );
 }
 
-/// The wombat's motion lasts 2.4 s, an f32 that reads as 2.40000009537 s: the run ends there
-/// without a sliver step for the last 95 ns (which also showed as the smallest step).
+/// The wombat's motion lasts 2.4 s as its file writes it, an f32 that widens to 2.40000009537
+/// s: the run simulates and reports 2.4 s, not 95 ns more.
 #[test]
-fn simulate_ends_a_motion_without_a_sliver_step() {
+fn simulate_runs_a_motion_for_its_length_as_written() {
     let v = simulate_json(&["wombat_16"]);
-    let end = v["sim_seconds"].as_f64().expect("number");
-    assert!((end - 2.4).abs() < 1e-6, "{v}");
+    assert_eq!(v["sim_seconds"].as_f64(), Some(2.4), "{v}");
+}
+
+/// 0.1005 s is three 1/30 s slices and half a millisecond: the remainder joins the last slice
+/// instead of ending the run with a sliver step (which would also be the smallest step).
+#[test]
+fn simulate_ends_without_a_sliver_step() {
+    let v = simulate_json(&["wombat_16", "--seconds", "0.1005"]);
+    assert_eq!(v["sim_seconds"].as_f64(), Some(0.1005), "{v}");
     let min = v["step_secs"]["min"].as_f64().expect("number");
     assert!(min > 1e-3, "a sliver step of {min} s: {v}");
 }

@@ -244,7 +244,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(s) => bail!("--seconds {s}: must be a positive number"),
         None => motion
             .as_ref()
-            .map(|m| f64::from(m.duration_s()).max(2.0))
+            .map(|m| seconds_as_written(m.duration_s()).max(2.0))
             .unwrap_or(2.0),
     };
     let mut muscles = MuscleCounts::default();
@@ -397,6 +397,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[error("{0}")]
 pub struct Interrupted(String);
 
+/// An `f32` duration as the decimal its file wrote, in `f64` seconds. Key times are `f32`: a
+/// motion written as 2.4 s widens to 2.40000009537 s, a length no one wrote, which the report
+/// would show. The shortest decimal that reads back as the same `f32` is what the file said
+/// (the run then ends 95 ns before the last key, where the posture is the key's to rounding).
+fn seconds_as_written(s: f32) -> f64 {
+    s.to_string().parse().unwrap_or(f64::from(s))
+}
+
 /// A progress bar on standard error over the simulated milliseconds of all the runs, hidden
 /// when standard error is not a terminal. It is moved between the timed slices only.
 fn progress_bar(seconds: f64, repeat: u32) -> ProgressBar {
@@ -516,8 +524,8 @@ fn run_once(
     let mut interrupted = false;
     while target < seconds {
         // A remainder under a millisecond joins this slice instead of becoming a sliver step
-        // of its own: a motion's f32 length read as f64 (2.4 s is 2.40000009537 s) ran 95 ns
-        // past the last whole slice, a step that also showed as the smallest in the report.
+        // of its own (`--seconds 0.1005` would end with a 0.5 ms step, which would also show
+        // as the smallest step in the report).
         let next = target + slice;
         target = if seconds - next < SLIVER_S {
             seconds
