@@ -10,6 +10,7 @@ pub mod app;
 pub mod calibration;
 pub mod character;
 pub mod clock;
+pub mod decimal;
 pub mod devices;
 pub mod files;
 pub mod pose;

@@ -14,6 +14,7 @@ use serde::Serialize;
 
 use leman::character::{Character, Primitive};
 use leman::clock::{Clock, RealClock};
+use leman::decimal::widen_as_written;
 use leman::sim::surface::SurfaceModel;
 use leman::sim::{
     AdvanceEnd, AdvanceReport, DeformationModel, FixedPosture, IntegratorKind, MotionPoses,
@@ -244,7 +245,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(s) => bail!("--seconds {s}: must be a positive number"),
         None => motion
             .as_ref()
-            .map(|m| seconds_as_written(m.duration_s()).max(2.0))
+            .map(|m| widen_as_written(m.duration_s()).max(2.0))
             .unwrap_or(2.0),
     };
     let mut muscles = MuscleCounts::default();
@@ -396,14 +397,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub struct Interrupted(String);
-
-/// An `f32` duration as the decimal its file wrote, in `f64` seconds. Key times are `f32`: a
-/// motion written as 2.4 s widens to 2.40000009537 s, a length no one wrote, which the report
-/// would show. The shortest decimal that reads back as the same `f32` is what the file said
-/// (the run then ends 95 ns before the last key, where the posture is the key's to rounding).
-fn seconds_as_written(s: f32) -> f64 {
-    s.to_string().parse().unwrap_or(f64::from(s))
-}
 
 /// A progress bar on standard error over the simulated milliseconds of all the runs, hidden
 /// when standard error is not a terminal. It is moved between the timed slices only.

@@ -86,8 +86,7 @@ struct Short(f32);
 
 impl Serialize for Short {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        let shortest: f64 = self.0.to_string().parse().unwrap_or(f64::NAN);
-        s.serialize_f64(shortest)
+        s.serialize_f64(crate::decimal::widen_as_written(self.0))
     }
 }
 
