@@ -9,9 +9,42 @@ pub fn widen_as_written(x: f32) -> f64 {
     x.to_string().parse().unwrap_or(f64::from(x))
 }
 
+/// `a − b` for two decimals read from `f32` numbers (by [`widen_as_written`]), rounded to the
+/// nine significant digits that an `f32` holds: 2.7 − 0.3 gives 2.4, where the `f64`
+/// subtraction gives 2.4000000000000004 (and 2.4 − 0.3 in `f32` gives 2.1000001). Non-finite
+/// differences stay what they are.
+pub fn difference_as_written(a: f64, b: f64) -> f64 {
+    let d = a - b;
+    if !d.is_finite() {
+        return d;
+    }
+    // `{:.8e}` rounds to nine significant digits; `f64`'s parser reads every such string.
+    format!("{d:.8e}").parse().unwrap_or(d)
+}
+
 #[cfg(test)]
 mod tests {
-    use super::widen_as_written;
+    use super::{difference_as_written, widen_as_written};
+
+    #[test]
+    fn differences_of_written_decimals_come_out_as_written() {
+        let w = widen_as_written;
+        assert_eq!(difference_as_written(w(2.4), w(0.3)), 2.1);
+        assert_eq!(difference_as_written(w(2.7), w(0.3)), 2.4);
+        assert_eq!(difference_as_written(w(0.3), w(2.4)), -2.1);
+        assert_eq!(difference_as_written(w(1.0), w(1.0)), 0.0);
+        assert_eq!(difference_as_written(w(3.75), w(0.125)), 3.625);
+        // Nine significant digits are kept, not rounded away.
+        assert_eq!(difference_as_written(w(2.4), w(1e-8)), 2.39999999);
+        assert_eq!(
+            difference_as_written(w(1.234_567_9), w(0.1)),
+            1.1345679,
+            "digits a file can write"
+        );
+        assert!(difference_as_written(f64::INFINITY, 1.0).is_infinite());
+        assert!(difference_as_written(f64::NAN, 1.0).is_nan());
+        assert_ne!(2.7 - 0.3, 2.4, "the plain subtraction is what this avoids");
+    }
 
     #[test]
     fn written_decimals_come_back_as_written() {

@@ -452,6 +452,37 @@ fn simulate_runs_a_motion_for_its_length_as_written() {
     assert_eq!(v["sim_seconds"].as_f64(), Some(2.4), "{v}");
 }
 
+/// Played from t = 0, a clamped motion whose keys start after 0 runs to its last key (the
+/// keys' span alone would stop it short of that key), and a looping one for one period.
+#[test]
+fn simulate_runs_a_motion_that_starts_late_to_its_last_key() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let source =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/characters/wombat_16.toml");
+    let mut c = leman::character::Character::load(&source).expect("example loads");
+    let motion = &mut c.motions[0];
+    for key in &mut motion.keys {
+        // Through the written decimals, so that the file says 0.3, …, 2.7.
+        key.time_s = (leman::decimal::widen_as_written(key.time_s) + 0.3) as f32;
+    }
+    for (extrapolation, seconds) in [
+        (leman::character::Extrapolation::Clamp, 2.7),
+        (leman::character::Extrapolation::Loop, 2.4),
+    ] {
+        c.motions[0].extrapolation = extrapolation;
+        let path = dir
+            .path()
+            .join(format!("wombat_late_{extrapolation:?}.toml"));
+        c.save(&path).expect("saved");
+        let v = simulate_json(&[path.to_str().expect("utf-8 path")]);
+        assert_eq!(
+            v["sim_seconds"].as_f64(),
+            Some(seconds),
+            "{extrapolation:?}: {v}"
+        );
+    }
+}
+
 /// 0.1005 s is three 1/30 s slices and half a millisecond: the remainder joins the last slice
 /// instead of ending the run with a sliver step (which would also be the smallest step).
 #[test]

@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::character::skeleton::{Posture, Skeleton};
+use crate::decimal::{difference_as_written, widen_as_written};
 
 /// A key posture at a time, with its spline shape parameters (each in [−1, 1], default 0 =
 /// Catmull-Rom).
@@ -74,6 +75,26 @@ impl Motion {
         match (self.keys.first(), self.keys.last()) {
             (Some(a), Some(b)) => b.time_s - a.time_s,
             _ => 0.0,
+        }
+    }
+
+    /// Simulated time one pass of the motion takes when it is played from t = 0, as its file
+    /// writes it, seconds: up to its last key when clamped (before its first key it holds that
+    /// key's posture), one period when looping (a loop is periodic, so any period is a whole
+    /// pass). 0 for a motion without keys.
+    ///
+    /// Key times are `f32`; the result is the decimal the file wrote
+    /// ([`crate::decimal::widen_as_written`]), and a period is the difference of the written
+    /// decimals (keys at 0.3 s and 2.4 s loop every 2.1 s, where the `f32` difference of
+    /// [`Motion::duration_s`] is 2.1000001 s).
+    pub fn pass_s(&self) -> f64 {
+        let (Some(first), Some(last)) = (self.keys.first(), self.keys.last()) else {
+            return 0.0;
+        };
+        let end = widen_as_written(last.time_s);
+        match self.extrapolation {
+            Extrapolation::Clamp => end.max(0.0),
+            Extrapolation::Loop => difference_as_written(end, widen_as_written(first.time_s)),
         }
     }
 
@@ -321,6 +342,31 @@ mod tests {
         let clamped = motion(Extrapolation::Clamp);
         assert_eq!(clamped.posture_at(-5.0), posture(0.0));
         assert_eq!(clamped.posture_at(50.0), posture(0.0));
+    }
+
+    #[test]
+    fn a_pass_ends_at_the_last_key_or_lasts_one_period() {
+        let mut m = motion(Extrapolation::Clamp);
+        for (key, t) in m.keys.iter_mut().zip([0.3, 1.3, 1.8, 3.3]) {
+            key.time_s = t;
+        }
+        // Keys from 0.3 s to 3.3 s: played from 0, the clamped motion ends at its last key,
+        // the loop repeats every 3 s.
+        assert_eq!(m.pass_s(), 3.3);
+        assert!(
+            m.duration_s() < 3.1,
+            "the keys' span is shorter than the pass"
+        );
+        m.extrapolation = Extrapolation::Loop;
+        assert_eq!(m.pass_s(), 3.0);
+        m.keys[3].time_s = 2.4;
+        assert_eq!(
+            m.pass_s(),
+            2.1,
+            "as written, not the f32 difference 2.1000001"
+        );
+        m.keys.clear();
+        assert_eq!(m.pass_s(), 0.0);
     }
 
     #[test]

@@ -14,7 +14,6 @@ use serde::Serialize;
 
 use leman::character::{Character, Primitive};
 use leman::clock::{Clock, RealClock};
-use leman::decimal::widen_as_written;
 use leman::sim::surface::SurfaceModel;
 use leman::sim::{
     AdvanceEnd, AdvanceReport, DeformationModel, FixedPosture, IntegratorKind, MotionPoses,
@@ -31,7 +30,8 @@ pub struct Args {
     /// posture, unless the character has a motion of that name).
     #[arg(long)]
     pub motion: Option<String>,
-    /// Simulated seconds (default: one pass of the motion, at least 2 s).
+    /// Simulated seconds (default: one pass of the motion from t = 0, at least 2 s: to its last
+    /// key, or one period of a looping motion).
     #[arg(long)]
     pub seconds: Option<f64>,
     /// Integrator: euler, verlet, rk2 or rk4.
@@ -243,10 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let seconds = match args.seconds {
         Some(s) if s.is_finite() && s > 0.0 => s,
         Some(s) => bail!("--seconds {s}: must be a positive number"),
-        None => motion
-            .as_ref()
-            .map(|m| widen_as_written(m.duration_s()).max(2.0))
-            .unwrap_or(2.0),
+        None => motion.as_ref().map(|m| m.pass_s().max(2.0)).unwrap_or(2.0),
     };
     let mut muscles = MuscleCounts::default();
     for s in &character.shapes {
