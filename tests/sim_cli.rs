@@ -208,6 +208,12 @@ fn simulate_bad_arguments_say_what_is_wrong() {
         ),
         (vec!["simulate", "arm_16", "--motion", "dance"], "dance"),
         (vec!["simulate", "arm_16", "--seconds", "0"], "--seconds"),
+        (
+            // Within the time resolution: nothing would be simulated.
+            vec!["simulate", "arm_16", "--seconds", "1e-9"],
+            "--seconds 0.000000001: must be a number of seconds longer than the simulation's \
+             time resolution (0.000000001 s)",
+        ),
         (vec!["simulate", "arm_16", "--repeat", "0"], "--repeat"),
         (
             vec!["simulate", "arm_16", "--recheck-fraction", "2"],
@@ -330,6 +336,10 @@ fn simulate_a_character_whose_forces_explode_reports_the_stall_and_fails() {
             assert_eq!(v["nonfinite_events"], 8, "{v}");
         } else {
             assert!(stdout.contains("Stalled"), "{stdout}");
+            assert!(
+                stdout.contains("Simulation slowdown         – (nothing was simulated)"),
+                "{stdout}"
+            );
         }
     }
     // A run that reaches its end reports no stall.
@@ -450,6 +460,14 @@ fn simulate_stopped_by_ctrl_c_reports_what_it_simulated() {
 fn simulate_runs_a_motion_for_its_length_as_written() {
     let v = simulate_json(&["wombat_16"]);
     assert_eq!(v["sim_seconds"].as_f64(), Some(2.4), "{v}");
+}
+
+/// A run just over the time resolution still takes its step.
+#[test]
+fn simulate_runs_the_shortest_length_it_accepts() {
+    let v = simulate_json(&["arm_16", "--seconds", "2e-9"]);
+    assert_eq!(v["sim_seconds"].as_f64(), Some(2e-9), "{v}");
+    assert_eq!(v["steps"], 1, "{v}");
 }
 
 /// Played from t = 0, a clamped motion whose keys start after 0 runs to its last key (the

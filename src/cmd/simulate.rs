@@ -17,7 +17,7 @@ use leman::clock::{Clock, RealClock};
 use leman::sim::surface::SurfaceModel;
 use leman::sim::{
     AdvanceEnd, AdvanceReport, DeformationModel, FixedPosture, IntegratorKind, MotionPoses,
-    PoseSource,
+    PoseSource, TIME_RESOLUTION_S,
 };
 
 /// Arguments of `leman simulate`.
@@ -241,8 +241,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => character.motions.first().cloned(),
     };
     let seconds = match args.seconds {
-        Some(s) if s.is_finite() && s > 0.0 => s,
-        Some(s) => bail!("--seconds {s}: must be a positive number"),
+        Some(s) if s.is_finite() && s > TIME_RESOLUTION_S => s,
+        Some(s) => bail!(
+            "--seconds {s}: must be a number of seconds longer than the simulation's time \
+             resolution ({TIME_RESOLUTION_S} s)"
+        ),
         None => motion.as_ref().map(|m| m.pass_s().max(2.0)).unwrap_or(2.0),
     };
     let mut muscles = MuscleCounts::default();
@@ -601,7 +604,9 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         ms(r.step_secs.min),
         ms(r.step_secs.max)
     )?;
-    let speed = if r.slowdown >= 1.0 {
+    let speed = if !r.slowdown.is_finite() {
+        "– (nothing was simulated)".to_string()
+    } else if r.slowdown >= 1.0 {
         format!("{:.2}× (slower than real time)", r.slowdown)
     } else {
         format!(

@@ -413,6 +413,11 @@ impl Snapshot {
     }
 }
 
+/// Times closer than this are the same simulation time, seconds: [`DeformationModel::advance`]
+/// treats a target within it as reached (so rounding in a sum of step sizes never asks for a
+/// step of a few attoseconds).
+pub const TIME_RESOLUTION_S: f64 = 1e-9;
+
 /// The one interface both deformation models implement (see the module docs).
 pub trait DeformationModel {
     /// Short name of the model kind (`"surface"`, `"lattice"`).

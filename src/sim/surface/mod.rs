@@ -39,7 +39,7 @@ use glam::Vec3;
 use super::ode::{Integrator, IntegratorKind, SecondOrderSystem, Tolerances};
 use super::{
     AdvanceEnd, AdvanceReport, DeformationModel, ParameterChange, PoseSource, Selection, SimError,
-    Snapshot, StepBudget, SurfaceMesh,
+    Snapshot, StepBudget, SurfaceMesh, TIME_RESOLUTION_S,
 };
 use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
 use crate::clock::Clock;
@@ -1051,7 +1051,7 @@ impl DeformationModel for SurfaceModel {
         // The planned step before the current run of failures (restored if the guard gives up).
         let mut step_before_failures = self.core.step_s;
         let mut stalled = false;
-        while target_time_s.is_finite() && self.core.t_s < target_time_s - 1e-9 {
+        while target_time_s.is_finite() && self.core.t_s < target_time_s - TIME_RESOLUTION_S {
             if !budget.may_step() {
                 break;
             }
@@ -1144,7 +1144,7 @@ impl DeformationModel for SurfaceModel {
             stalled = true;
         }
         report.time_s = self.core.t_s;
-        report.end = if self.core.t_s >= target_time_s - 1e-9 {
+        report.end = if self.core.t_s >= target_time_s - TIME_RESOLUTION_S {
             AdvanceEnd::ReachedTarget
         } else if stalled {
             AdvanceEnd::Stalled
