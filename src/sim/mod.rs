@@ -445,7 +445,10 @@ pub trait DeformationModel {
     /// Applies a parameter change (takes effect at the next step).
     fn apply(&mut self, change: &ParameterChange) -> Result<(), SimError>;
 
-    /// The current state (positions, velocities, time, step size, materials).
+    /// The current state: positions, velocities, time, step size, and every parameter
+    /// [`apply`](Self::apply) can change (materials, contact and solver settings, the
+    /// integrator). Restoring it continues exactly as the model went on from it, which undo and
+    /// baking need; a caller that shows the settings takes them again from where it set them.
     fn snapshot(&self) -> Snapshot;
 
     /// Returns to a state made by [`snapshot`](Self::snapshot) of this model; a snapshot of

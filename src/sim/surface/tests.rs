@@ -436,6 +436,15 @@ fn snapshot_and_restore_continue_identically() {
     let snap = m.snapshot();
     m.advance(0.6, &mut poses, &mut Unlimited, None);
     let first = (m.core.x.clone(), m.core.v.clone(), m.time_s());
+    // Settings changed after the snapshot are part of what it restores.
+    for change in [
+        ParameterChange::Integrator(IntegratorKind::Rk4),
+        ParameterChange::HoldContacts(false),
+        ParameterChange::RecheckFraction(0.5),
+        ParameterChange::Gravity(Vec3::ZERO),
+    ] {
+        m.apply(&change).expect("a valid change");
+    }
     m.restore(&snap).expect("accepted");
     assert_eq!(m.time_s(), snap.time_s);
     m.advance(0.6, &mut poses, &mut Unlimited, None);
