@@ -448,7 +448,8 @@ pub trait DeformationModel {
     /// The current state: positions, velocities, time, step size, and every parameter
     /// [`apply`](Self::apply) can change (materials, contact and solver settings, the
     /// integrator). Restoring it continues exactly as the model went on from it, which undo and
-    /// baking need; a caller that shows the settings takes them again from where it set them.
+    /// baking need. A caller that shows these settings (the workstation's panel) and wants its
+    /// current values to win applies them again after a restore.
     fn snapshot(&self) -> Snapshot;
 
     /// Returns to a state made by [`snapshot`](Self::snapshot) of this model; a snapshot of
