@@ -154,15 +154,18 @@ impl Motion {
         Ok(())
     }
 
-    /// The posture at time `t_s` (not clamped to joint limits; forward kinematics clamps).
-    pub fn posture_at(&self, t_s: f32) -> Posture {
+    /// The posture at time `t_s`, seconds (not clamped to joint limits; forward kinematics
+    /// clamps). The time is `f64` because it is a running simulation clock: a looping motion
+    /// wraps it into one period before it is narrowed to the keys' `f32` (an `f32` clock a day
+    /// in is only good to about 8 ms, and so would the posture's time be).
+    pub fn posture_at(&self, t_s: f64) -> Posture {
         let mut out = Posture::default();
         self.posture_at_into(t_s, &mut out);
         out
     }
 
     /// [`Motion::posture_at`] writing into `out` (reuses its storage).
-    pub fn posture_at_into(&self, t_s: f32, out: &mut Posture) {
+    pub fn posture_at_into(&self, t_s: f64, out: &mut Posture) {
         let n = self.keys.len();
         let Some(first) = self.keys.first() else {
             out.angles_rad.clear();
@@ -172,17 +175,20 @@ impl Motion {
         let dofs = first.posture.angles_rad.len();
         out.angles_rad.resize(dofs, 0.0);
         let last = &self.keys[n - 1];
-        let t_s = if t_s.is_finite() { t_s } else { first.time_s };
+        let (first_s, last_s) = (f64::from(first.time_s), f64::from(last.time_s));
+        let t_s = if t_s.is_finite() { t_s } else { first_s };
         let looping = self.extrapolation == Extrapolation::Loop && n >= 2;
+        // Wrapped or clamped into the keys' span in f64, then narrowed: within the first
+        // period of a motion whose first key is at 0 this is the clock's own f32.
         let t = if looping {
-            let period = last.time_s - first.time_s;
+            let period = last_s - first_s;
             if period > 0.0 {
-                first.time_s + (t_s - first.time_s).rem_euclid(period)
+                (first_s + (t_s - first_s).rem_euclid(period)) as f32
             } else {
                 first.time_s
             }
         } else {
-            t_s.clamp(first.time_s, last.time_s)
+            t_s.clamp(first_s, last_s) as f32
         };
         if n == 1 || t <= first.time_s {
             copy_posture(&first.posture, out);
@@ -306,7 +312,7 @@ mod tests {
         for ex in [Extrapolation::Clamp, Extrapolation::Loop] {
             let m = motion(ex);
             for key in &m.keys {
-                let p = m.posture_at(key.time_s);
+                let p = m.posture_at(key.time_s.into());
                 for (a, b) in p.angles_rad.iter().zip(&key.posture.angles_rad) {
                     assert!((a - b).abs() < 1e-6, "{ex:?} at {}: {a} vs {b}", key.time_s);
                 }
@@ -327,8 +333,10 @@ mod tests {
             t += 0.013;
         }
         // C1 across key 1 (tension, continuity, bias 0): one-sided slopes agree.
-        let left = (m.posture_at(1.0).angles_rad[0] - m.posture_at(1.0 - h).angles_rad[0]) / h;
-        let right = (m.posture_at(1.0 + h).angles_rad[0] - m.posture_at(1.0).angles_rad[0]) / h;
+        let left =
+            (m.posture_at(1.0).angles_rad[0] - m.posture_at(1.0 - h).angles_rad[0]) / h as f32;
+        let right =
+            (m.posture_at(1.0 + h).angles_rad[0] - m.posture_at(1.0).angles_rad[0]) / h as f32;
         assert!((left - right).abs() < 0.05, "{left} vs {right}");
     }
 
@@ -342,6 +350,21 @@ mod tests {
         let clamped = motion(Extrapolation::Clamp);
         assert_eq!(clamped.posture_at(-5.0), posture(0.0));
         assert_eq!(clamped.posture_at(50.0), posture(0.0));
+    }
+
+    #[test]
+    fn a_loop_a_day_in_shows_the_posture_of_its_first_period() {
+        // 86 400.7 s as an f32 is 86 400.703125 s: 3 ms late, where the first key's angle
+        // moves at about 1 rad/s. Wrapped in f64 first, it is the same f32 time as 0.7 s.
+        let looped = motion(Extrapolation::Loop);
+        assert_eq!(
+            looped.posture_at(0.7 + 3.0 * 28_800.0),
+            looped.posture_at(0.7)
+        );
+        assert_eq!(
+            looped.posture_at(0.7 - 3.0 * 28_800.0),
+            looped.posture_at(0.7)
+        );
     }
 
     #[test]
@@ -374,7 +397,8 @@ mod tests {
         let mut m = motion(Extrapolation::Clamp);
         m.keys[1].tension = 1.0;
         let h = 1e-3;
-        let right = (m.posture_at(1.0 + h).angles_rad[0] - m.posture_at(1.0).angles_rad[0]) / h;
+        let right =
+            (m.posture_at(1.0 + h).angles_rad[0] - m.posture_at(1.0).angles_rad[0]) / h as f32;
         assert!(right.abs() < 0.05, "{right}");
     }
 

@@ -311,7 +311,7 @@ impl BentTorso {
         let mut surface = SurfaceMesh::default();
         model.surface_mesh_into(&mut surface);
         let mut posture = Posture::neutral(&character.skeleton);
-        motion.posture_at_into(time_s, &mut posture);
+        motion.posture_at_into(f64::from(time_s), &mut posture);
         let mut skeleton_pose = SkeletonPose::default();
         character
             .skeleton

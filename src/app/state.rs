@@ -562,7 +562,7 @@ impl AppState {
 
     fn posture_at(&mut self, time_s: f64) {
         match self.motion.and_then(|m| self.character.motions.get(m)) {
-            Some(motion) => motion.posture_at_into(time_s as f32, &mut self.posture),
+            Some(motion) => motion.posture_at_into(time_s, &mut self.posture),
             None => self.posture = Posture::neutral(&self.character.skeleton),
         }
         if self.posture.is_finite() {
@@ -593,7 +593,7 @@ impl AppState {
         let motion = self.motion.and_then(|m| character.motions.get(m));
         let neutral = Posture::neutral(&character.skeleton);
         let mut poses = |t: f64, out: &mut Posture| match motion {
-            Some(m) => m.posture_at_into(t as f32, out),
+            Some(m) => m.posture_at_into(t, out),
             None => out.clone_from(&neutral),
         };
         let report = model.advance(

@@ -1300,7 +1300,7 @@ mod file_tests {
                 let samples = 150;
                 for step in 0..=samples {
                     let t = m.duration_s() * step as f32 / samples as f32;
-                    let posture = m.posture_at(t);
+                    let posture = m.posture_at(t.into());
                     let pose = c.skeleton.forward_kinematics(&posture);
                     c.shape_instances_into(&posture, &pose, t, &mut instances);
                     for (joint, probes, which) in [
@@ -1356,7 +1356,7 @@ mod file_tests {
             for m in &c.motions {
                 let a = c.skeleton.forward_kinematics(&m.posture_at(0.0));
                 let quarter = m.duration_s() * 0.25;
-                let b = c.skeleton.forward_kinematics(&m.posture_at(quarter));
+                let b = c.skeleton.forward_kinematics(&m.posture_at(quarter.into()));
                 let moved = a
                     .world_from_joint
                     .iter()

@@ -47,7 +47,7 @@ pub struct MotionPoses<'a>(pub &'a crate::character::Motion);
 
 impl PoseSource for MotionPoses<'_> {
     fn posture_at(&mut self, time_s: f64, out: &mut Posture) {
-        self.0.posture_at_into(time_s as f32, out);
+        self.0.posture_at_into(time_s, out);
     }
 }
 

@@ -82,7 +82,7 @@ fn skin_follows_the_skeleton_through_a_motion() {
     let start = forearm_centroid(&m);
     for t in [0.25, 0.5, 0.75, 1.0] {
         m.advance(t, &mut poses, &mut Unlimited, None);
-        let pose = c.skeleton.forward_kinematics(&motion.posture_at(t as f32));
+        let pose = c.skeleton.forward_kinematics(&motion.posture_at(t));
         let e = pose.world_from(elbow).position_m;
         let w = pose.world_from(wrist).position_m;
         // The forearm section's centre lies on the bone segment, 5/8 of the way to the wrist.
