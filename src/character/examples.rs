@@ -1299,10 +1299,10 @@ mod file_tests {
             for m in &c.motions {
                 let samples = 150;
                 for step in 0..=samples {
-                    let t = m.duration_s() * step as f32 / samples as f32;
-                    let posture = m.posture_at(t.into());
+                    let t = m.pass_s() * f64::from(step) / f64::from(samples);
+                    let posture = m.posture_at(t);
                     let pose = c.skeleton.forward_kinematics(&posture);
-                    c.shape_instances_into(&posture, &pose, t, &mut instances);
+                    c.shape_instances_into(&posture, &pose, t as f32, &mut instances);
                     for (joint, probes, which) in [
                         (c.skin.bottom_joint, &bottom, "bottom"),
                         (c.skin.top_joint, &top, "top"),
@@ -1355,8 +1355,8 @@ mod file_tests {
             let c = build(name, 16, 16).expect("known example");
             for m in &c.motions {
                 let a = c.skeleton.forward_kinematics(&m.posture_at(0.0));
-                let quarter = m.duration_s() * 0.25;
-                let b = c.skeleton.forward_kinematics(&m.posture_at(quarter.into()));
+                let quarter = m.pass_s() * 0.25;
+                let b = c.skeleton.forward_kinematics(&m.posture_at(quarter));
                 let moved = a
                     .world_from_joint
                     .iter()
