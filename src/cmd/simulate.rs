@@ -106,7 +106,8 @@ struct Report {
     repeats: u32,
     wall_seconds_min: f64,
     wall_seconds_max: f64,
-    slowdown: f64,
+    /// `wall_seconds / sim_seconds`; none (null) when nothing was simulated.
+    slowdown: Option<f64>,
     steps: u64,
     rejected_steps: u64,
     constraint_rejections: u64,
@@ -317,11 +318,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         repeats: runs.len() as u32,
         wall_seconds_min: fastest.as_secs_f64(),
         wall_seconds_max: slowest.as_secs_f64(),
-        slowdown: if sim_s > 0.0 {
-            wall_s / sim_s
-        } else {
-            f64::INFINITY
-        },
+        slowdown: (sim_s > 0.0).then(|| wall_s / sim_s),
         steps: total.steps,
         rejected_steps: total.rejected_steps,
         constraint_rejections: total.constraint_rejections,
@@ -604,16 +601,15 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         ms(r.step_secs.min),
         ms(r.step_secs.max)
     )?;
-    let speed = if !r.slowdown.is_finite() {
-        "– (nothing was simulated)".to_string()
-    } else if r.slowdown >= 1.0 {
-        format!("{:.2}× (slower than real time)", r.slowdown)
-    } else {
-        format!(
-            "{:.4}× ({:.1}× faster than real time)",
-            r.slowdown,
-            1.0 / r.slowdown
-        )
+    let speed = match r.slowdown {
+        None => "– (nothing was simulated)".to_string(),
+        Some(slowdown) if slowdown >= 1.0 => {
+            format!("{slowdown:.2}× (slower than real time)")
+        }
+        Some(slowdown) => format!(
+            "{slowdown:.4}× ({:.1}× faster than real time)",
+            1.0 / slowdown
+        ),
     };
     writeln!(out, "{:<28}{speed}", "Simulation slowdown")?;
     writeln!(
