@@ -51,10 +51,10 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("Error: {err}");
-            let mut causes = err.chain().skip(1).peekable();
-            if causes.peek().is_some() {
+            let causes = untold_causes(&err);
+            if !causes.is_empty() {
                 eprintln!("\nCaused by:");
-                for (i, cause) in causes.enumerate() {
+                for (i, cause) in causes.iter().enumerate() {
                     eprintln!("    {i}: {cause}");
                 }
             }
@@ -65,6 +65,25 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// The causes of `err` that its message does not already tell, outermost first.
+///
+/// Some of the library's errors name their cause in their own message (`cannot read character
+/// file F: Is a directory`), so that a user interface showing only the message shows why, and
+/// also return it as their source. Printing every link of the chain would then say the cause
+/// twice; a cause whose text ends the message printed just before it is left out.
+fn untold_causes(err: &anyhow::Error) -> Vec<String> {
+    let mut told = err.to_string();
+    let mut causes = Vec::new();
+    for cause in err.chain().skip(1) {
+        let text = cause.to_string();
+        if !told.ends_with(&text) {
+            causes.push(text.clone());
+        }
+        told = text;
+    }
+    causes
 }
 
 fn run() -> anyhow::Result<()> {

@@ -287,6 +287,21 @@ fn errors_print_their_message_and_causes_without_a_stack_trace() {
 }
 
 #[test]
+fn simulate_a_directory_says_it_cannot_read_it_and_names_the_cause_once() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/characters");
+    let out = leman().args(["simulate", dir]).output().expect("runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let first = stderr.lines().next().unwrap_or_default();
+    assert!(
+        first.starts_with(&format!("Error: cannot read character file {dir}: ")),
+        "{stderr}"
+    );
+    // The OS's reason ends the message; it is not repeated as a cause below it.
+    assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
+}
+
+#[test]
 fn simulate_motion_none_holds_the_neutral_posture() {
     // As `--help` says: `--motion none` runs without a motion (the JSON's motion is null).
     let v = simulate_json(&["penguin_16", "--motion", "none", "--seconds", "0.1"]);

@@ -158,6 +158,11 @@ struct MuscleCounts {
 
 fn resolve_character(arg: &str) -> anyhow::Result<(Character, Option<PathBuf>)> {
     let as_path = Path::new(arg);
+    if as_path.exists() && !as_path.is_file() {
+        // A directory or a device: reading it says what it is.
+        let c = Character::load(as_path)?;
+        return Ok((c, Some(as_path.to_path_buf())));
+    }
     let candidates = [
         as_path.to_path_buf(),
         Path::new("assets/characters").join(format!("{arg}.toml")),
