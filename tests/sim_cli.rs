@@ -301,6 +301,26 @@ fn simulate_a_directory_says_it_cannot_read_it_and_names_the_cause_once() {
     assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
 }
 
+#[cfg(target_os = "linux")]
+#[test]
+fn simulate_reads_a_character_piped_to_dev_stdin() {
+    let file = std::fs::File::open(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/assets/characters/penguin_16.toml"
+    ))
+    .expect("the example file");
+    let out = leman()
+        .args(["simulate", "/dev/stdin", "--seconds", "0.05", "--json"])
+        .stdin(file)
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(report["skin_points"], 256, "{report}");
+    assert_eq!(report["character"], "penguin", "{report}");
+}
+
 #[test]
 fn simulate_motion_none_holds_the_neutral_posture() {
     // As `--help` says: `--motion none` runs without a motion (the JSON's motion is null).
