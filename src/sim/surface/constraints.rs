@@ -643,8 +643,8 @@ fn apply_moves(
     );
     // The report of the moved points, as `ConstraintOutcome::report` would make it point by
     // point, without a branch per point: which of the free points moved is scattered, and a
-    // scan branching on it mispredicted often enough to be about a quarter of this function's
-    // time on the penguin.
+    // scan branching on it mispredicted often enough to take about a quarter of `enforce`'s
+    // own profile samples on the penguin.
     let (applied, component) = (&sc.applied_m[..free], &sc.applied_component_m[..free]);
     let summary = moves_summary(applied, component);
     out.corrected += summary.moved;
@@ -683,7 +683,7 @@ struct MovesSummary {
 crate::sim::simd::multiversion! {
     /// The count and maxima of [`eq13_positions`]' output (`applied` and `component` are −1
     /// where nothing moved and positive where a point did), in independent lanes so the loop
-    /// vectorises. An infinite correction comes out infinite (the step is then rejected).
+    /// vectorises. An infinite correction comes out infinite, as it did from the scan.
     fn moves_summary(applied: &[f32], component: &[f32]) -> MovesSummary {
         use crate::sim::simd::LANES;
         #[inline(always)]
