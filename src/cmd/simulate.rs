@@ -158,13 +158,13 @@ struct MuscleCounts {
 
 fn resolve_character(arg: &str) -> anyhow::Result<(Character, Option<PathBuf>)> {
     let as_path = Path::new(arg);
-    if as_path.exists() && !as_path.is_file() {
-        // A directory or a device: reading it says what it is.
+    if as_path.exists() {
+        // Whatever it is: a directory or a device is read too, and its error says what it is
+        // (`/dev/stdin` reads a piped file).
         let c = Character::load(as_path)?;
         return Ok((c, Some(as_path.to_path_buf())));
     }
     let candidates = [
-        as_path.to_path_buf(),
         Path::new("assets/characters").join(format!("{arg}.toml")),
         Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("assets/characters")
