@@ -641,32 +641,13 @@ fn apply_moves(
         v1,
         v2,
     );
-    // The report of the moved points, as `ConstraintOutcome::report` would make it point by
-    // point, without a branch per point: which of the free points moved is scattered, and a
-    // scan branching on it mispredicted often enough to take about a quarter of `enforce`'s
-    // own profile samples on the penguin.
-    let (applied, component) = (&sc.applied_m[..free], &sc.applied_component_m[..free]);
-    let summary = moves_summary(applied, component);
-    out.corrected += summary.moved;
-    out.max_component_m = out.max_component_m.max(summary.max_component_m);
-    if summary.max_correction_m > out.max_correction_m {
-        // The first point with the largest correction, as the scan's strict `>` kept.
-        if let Some(f) = applied
-            .iter()
-            .position(|&len| len == summary.max_correction_m)
-        {
-            out.max_correction_m = summary.max_correction_m;
-            out.worst = (f as u32, sc.points.last_shape[f]);
-        }
-    }
-    let start = touched.len();
-    touched.resize(start + free, 0);
-    let mut listed = start;
-    for (f, &len) in applied.iter().enumerate() {
-        touched[listed] = f as u32;
-        listed += usize::from(len > recheck_m);
-    }
-    touched.truncate(listed);
+    out.report_all(
+        &sc.applied_m[..free],
+        &sc.applied_component_m[..free],
+        &sc.points.last_shape,
+        recheck_m,
+        touched,
+    );
     out
 }
 
@@ -749,6 +730,43 @@ impl ConstraintOutcome {
         if len > recheck_m {
             touched.push(f as u32);
         }
+    }
+
+    /// [`Self::report`] for every free point at once: `applied` and `component` as
+    /// [`eq13_positions`] left them (−1 where nothing moved), `last_shape` per free point.
+    /// The same outcome and `touched` list as reporting the moved points one by one in index
+    /// order, without a branch per point: which points moved is scattered, and a scan branching
+    /// on it mispredicted often enough to take about a quarter of `enforce`'s own profile
+    /// samples on the penguin.
+    fn report_all(
+        &mut self,
+        applied: &[f32],
+        component: &[f32],
+        last_shape: &[u32],
+        recheck_m: f32,
+        touched: &mut Vec<u32>,
+    ) {
+        let summary = moves_summary(applied, component);
+        self.corrected += summary.moved;
+        self.max_component_m = self.max_component_m.max(summary.max_component_m);
+        if summary.max_correction_m > self.max_correction_m {
+            // The first point with the largest correction, as `report`'s strict `>` keeps.
+            if let Some(f) = applied
+                .iter()
+                .position(|&len| len == summary.max_correction_m)
+            {
+                self.max_correction_m = summary.max_correction_m;
+                self.worst = (f as u32, last_shape[f]);
+            }
+        }
+        let start = touched.len();
+        touched.resize(start + applied.len(), 0);
+        let mut listed = start;
+        for (f, &len) in applied.iter().enumerate() {
+            touched[listed] = f as u32;
+            listed += usize::from(len > recheck_m);
+        }
+        touched.truncate(listed);
     }
 }
 
@@ -1835,8 +1853,9 @@ mod tests {
         }
     }
 
-    /// The branch-free summary agrees with a point-by-point scan (`ConstraintOutcome::report`'s
-    /// rule) on every SIMD copy: counts, both maxima, infinite corrections, none moved.
+    /// The branch-free summary and report agree with a point-by-point scan
+    /// (`ConstraintOutcome::report`'s rule) on every SIMD copy: counts, both maxima, the worst
+    /// point, the re-check list, infinite corrections, none moved.
     #[test]
     fn moves_summary_matches_a_scan_of_the_moved_points() {
         use crate::sim::simd::{SimdLevel, with_simd_level};
@@ -1855,13 +1874,27 @@ mod tests {
                     applied[40] = f32::INFINITY;
                     component[40] = f32::INFINITY;
                 }
+                let last_shape: Vec<u32> = (0..n as u32).map(|f| f % 5).collect();
                 let mut want = ConstraintOutcome::default();
                 let mut touched = Vec::new();
                 for f in 0..n {
                     if applied[f] >= 0.0 {
-                        want.report(f, applied[f], component[f], 0, 1.0, &mut touched);
+                        want.report(
+                            f,
+                            applied[f],
+                            component[f],
+                            last_shape[f],
+                            2e-3,
+                            &mut touched,
+                        );
                     }
                 }
+                let mut got = ConstraintOutcome::default();
+                let mut got_touched = vec![7];
+                got.report_all(&applied, &component, &last_shape, 2e-3, &mut got_touched);
+                assert_eq!(got, want, "n {n}, {moved_share}");
+                assert_eq!(got_touched[0], 7, "appends to the list");
+                assert_eq!(got_touched[1..], touched[..], "n {n}, {moved_share}");
                 for level in SimdLevel::ALL {
                     let got = with_simd_level(level, || moves_summary(&applied, &component));
                     assert_eq!(got.moved, want.corrected, "n {n}, {moved_share}, {level:?}");
