@@ -493,11 +493,10 @@ pub fn enforce(
                     round: round as u8,
                 };
                 let motion = SurfaceMotion {
-                    shape: input
+                    start: input
                         .shapes_start
                         .get(s_idx)
-                        .filter(|_| input.shapes_start.len() == shapes.len())
-                        .map(|start| (s, start)),
+                        .filter(|_| input.shapes_start.len() == shapes.len()),
                     inv_h,
                 };
                 changed += match s.geometry.primitive {
@@ -891,29 +890,25 @@ crate::sim::simd::multiversion! {
     }
 }
 
-/// How the surface of the shape taking its turn moved over the step, for eq. 13's relative
-/// velocity.
+/// How the surface of the shape taking its turn (the step's end instance, which the stage
+/// holds) moved over the step, for eq. 13's relative velocity.
 #[derive(Clone, Copy)]
 struct SurfaceMotion<'a> {
-    /// The shape at the end and at the start of the step; `None` when the step's shapes differ
-    /// (a character edit), and the surface then counts as still.
-    shape: Option<(&'a ShapeInstance, &'a ShapeInstance)>,
+    /// The same shape at the start of the step; `None` when the step's shapes differ (a
+    /// character edit), and the surface then counts as still.
+    start: Option<&'a ShapeInstance>,
     /// 1 / step length, 1/s (0 for an empty step).
     inv_h: f32,
 }
 
 impl SurfaceMotion<'_> {
-    /// Velocity of the surface point now at `q` (world): it was at
-    /// `start.world_from_shape(end.shape_from_world(q))` at the start of the step.
+    /// Velocity of the surface point now at `q` (world), whose place in the shape's frame at
+    /// the end of the step is `local` (the caller has it already): it was at
+    /// `start.world_from_shape(local)` at the start of the step.
     #[inline]
-    fn velocity_at(&self, q: Vec3) -> Vec3 {
-        match self.shape {
-            Some((end, start)) => {
-                let was = start
-                    .world_from_shape
-                    .transform_point3(end.shape_from_world.transform_point3(q));
-                (q - was) * self.inv_h
-            }
+    fn velocity_at(&self, q: Vec3, local: Vec3) -> Vec3 {
+        match self.start {
+            Some(start) => (q - start.world_from_shape.transform_point3(local)) * self.inv_h,
             None => Vec3::ZERO,
         }
     }
@@ -1038,7 +1033,7 @@ fn sphere_stage(
                 s.shape_from_world.transform_point3(moved_to),
                 s.shape_from_world.transform_vector3(dir),
             );
-            let velocity = motion.velocity_at(moved_to);
+            let velocity = motion.velocity_at(moved_to, local);
             log.record(f, moved_to, velocity, dir, local, local_normal, owed);
             moved += 1;
         }
@@ -1137,8 +1132,8 @@ fn general_stage(
     }
     mv.world_moves(&s.world_from_shape, &sc.project.p, &sc.origin, SETTLED_M);
     let shapes = motion
-        .shape
-        .map(|(end, start)| (&end.shape_from_world, &start.world_from_shape));
+        .start
+        .map(|start| (&s.shape_from_world, &start.world_from_shape));
     mv.finish(&sc.project.point, &sc.points.q, shapes, motion.inv_h);
     let mut log = MoveLog::new(&mut sc.points);
     let (mv, project) = (&sc.moves, &sc.project);
