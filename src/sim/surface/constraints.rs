@@ -14,7 +14,7 @@
 //!   [`ShapeGeometry::bounding_ellipsoid_m`]), both grown by the largest fat and a margin,
 //!   testing only grid rows whose bounding box meets the shape's world box (a two-level
 //!   hierarchy). They stay valid while the points' accumulated movement (`max |v|·h`
-//!   per step) plus each shape's movement (translation, rotation angle × extent, growth of the
+//!   per step) plus each shape's movement (translation, rotation chord × extent, growth of the
 //!   extent) stays below the margin, so no shape can reach a point that is not in its runs.
 //! - **Per shape, two stages.** A vectorised loop over the runs maps every fat point into the
 //!   shape frame and keeps those inside both the shape's extent box and its bounding
@@ -238,11 +238,14 @@ pub struct ConstraintInput<'a> {
     pub rounds: usize,
 }
 
-/// Rotation angle between two frames' rotations, radians.
-fn rotation_angle(a: &Affine3A, b: &Affine3A) -> f32 {
+/// How far the rotation from frame `a` to frame `b` moves a point at unit distance from the
+/// frames' origin, metres per metre: the chord `2 sin(θ/2) = √(3 − tr(R_b R_aᵀ))` of the
+/// rotation angle `θ`. This is the exact largest displacement (no larger than the arc `θ`,
+/// which this bound used to be), and needs a square root where the angle needed an `acos`.
+fn rotation_chord(a: &Affine3A, b: &Affine3A) -> f32 {
     let (ma, mb) = (a.matrix3, b.matrix3);
     let trace = ma.x_axis.dot(mb.x_axis) + ma.y_axis.dot(mb.y_axis) + ma.z_axis.dot(mb.z_axis);
-    (0.5 * (trace - 1.0)).clamp(-1.0, 1.0).acos()
+    (3.0 - trace).max(0.0).sqrt()
 }
 
 impl Broadphase {
@@ -266,7 +269,7 @@ impl Broadphase {
                 let (was, now) = (&self.ref_frames[k], &s.world_from_shape);
                 let (e_was, e_now) = (self.ref_extents[k], self.extents[k]);
                 let d = (Vec3::from(now.translation) - Vec3::from(was.translation)).length()
-                    + rotation_angle(was, now) * e_was.length().max(e_now.length())
+                    + rotation_chord(was, now) * e_was.length().max(e_now.length())
                     + (e_now - e_was).max(Vec3::ZERO).max_element();
                 shape_moved = shape_moved.max(d);
             }
