@@ -111,9 +111,9 @@ mod tests {
         // No padding left for stale bytes: 12 bytes of position, the zero lane, 16 of rotation.
         assert_eq!(std::mem::size_of::<Pose>(), 32);
         assert_eq!(std::mem::offset_of!(Pose, zero_lane), 12);
-        let json = serde_json::to_string(&p).unwrap();
+        let json = serde_json::to_string(&p).expect("a pose serialises");
         assert!(!json.contains("zero_lane"), "{json}");
-        let back: Pose = serde_json::from_str(&json).unwrap();
+        let back: Pose = serde_json::from_str(&json).expect("its JSON reads back");
         assert_eq!(back, p);
         assert_eq!(back.zero_lane.to_bits(), 0);
         assert!(!format!("{p:?}").contains("zero_lane"));
