@@ -363,6 +363,10 @@ fn simulate_a_character_whose_forces_explode_reports_the_stall_and_fails() {
             stderr.contains("the simulation stalled at t = 0.0000 s of 0.2 s"),
             "{stderr}"
         );
+        assert!(
+            !stderr.contains("euler_step_s"),
+            "an adaptive run's stall does not blame a fixed step: {stderr}"
+        );
         // The report is still printed, and says where it stopped.
         if json {
             let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
@@ -377,6 +381,23 @@ fn simulate_a_character_whose_forces_explode_reports_the_stall_and_fails() {
             );
         }
     }
+    // With a fixed-step integrator the message also names the step as a suspect.
+    let out = leman()
+        .args([
+            "simulate",
+            path.to_str().expect("utf-8 path"),
+            "--seconds",
+            "0.2",
+        ])
+        .args(["--integrator", "euler"])
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("stalled") && stderr.contains("a smaller euler_step_s"),
+        "{stderr}"
+    );
     // A run that reaches its end reports no stall.
     let v = simulate_json(&["penguin_16", "--seconds", "0.1"]);
     assert!(v["stalled_at_s"].is_null(), "{v}");
@@ -544,4 +565,17 @@ fn simulate_ends_without_a_sliver_step() {
     assert_eq!(v["sim_seconds"].as_f64(), Some(0.1005), "{v}");
     let min = v["step_secs"]["min"].as_f64().expect("number");
     assert!(min > 1e-3, "a sliver step of {min} s: {v}");
+}
+
+/// Explicit Euler at each full-resolution example's own `euler_step_s` stays finite through
+/// several seconds of its motion (it grows any mode whose `h ω²` outruns its damping, slowly:
+/// the arm at the 0.5 ms of the other examples diverged and stalled after 4.7 s).
+#[test]
+fn explicit_euler_at_each_examples_own_step_runs_its_motion_without_diverging() {
+    for name in ["penguin", "wombat", "torso", "arm"] {
+        let v = simulate_json(&[name, "--integrator", "euler", "--seconds", "6"]);
+        assert!(v["stalled_at_s"].is_null(), "{name}: {v}");
+        assert_eq!(v["nonfinite_events"], 0, "{name}: {v}");
+        assert_eq!(v["sim_seconds"].as_f64(), Some(6.0), "{name}: {v}");
+    }
 }

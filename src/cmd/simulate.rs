@@ -369,11 +369,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     .context("writing the report to standard output")?;
     if let Some(t) = report.stalled_at_s {
+        // A fixed step that is too long for the skin diverges slowly, after a good start.
+        let fixed_step = if kind.is_adaptive() {
+            ""
+        } else {
+            "; with the fixed-step euler and rk4, also a step too long for the skin: try a \
+             smaller euler_step_s in the character's [simulation] or an adaptive integrator"
+        };
         bail!(
             "the simulation stalled at t = {t:.4} s of {seconds} s: {} attempts in a row, \
              shrinking to the minimum step, were non-finite or exploding, so the last good \
              state was kept (the character's forces are out of range: look for a huge \
-             stiffness, a tiny mass, or a shape or tissue anchor far from the skin)",
+             stiffness, a tiny mass, or a shape or tissue anchor far from the skin{fixed_step})",
             leman::sim::surface::GUARD_ATTEMPTS
         );
     }
