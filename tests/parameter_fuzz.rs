@@ -57,10 +57,11 @@ fn tolerances() -> impl Strategy<Value = Tolerances> {
             v(),
             prop_oneof![Just(0u32), Just(1), Just(u32::MAX)],
         ),
-        (v(), v(), v()),
+        (v(), v(), v(), v()),
     )
-        .prop_map(|((a, b, c, d), (e, f, g, h), (i, j, k))| Tolerances {
-            fixed_step_s: a,
+        .prop_map(|((a, b, c, d), (e, f, g, h), (i, j, k, l))| Tolerances {
+            euler_step_s: a,
+            rk4_step_s: l,
             min_step_s: b,
             max_step_s: c,
             position_tolerance: d,

@@ -280,16 +280,7 @@ impl AppState {
         let vehicle = frame_character(&character, &skeleton_pose, &calibration);
         let params = CharacterParams::of(&character);
         let d = character.simulation;
-        let tolerances = Tolerances {
-            min_step_s: f64::from(d.min_step_s),
-            max_step_s: f64::from(d.max_step_s),
-            fixed_step_s: f64::from(d.euler_step_s),
-            position_tolerance: f64::from(d.epsilon_r),
-            velocity_tolerance: f64::from(d.epsilon_v),
-            position_threshold_m: f64::from(d.r_threshold_m),
-            velocity_threshold_m_per_s: f64::from(d.v_threshold_m_per_s),
-            ..Tolerances::default()
-        };
+        let tolerances = crate::sim::surface::tolerances_of(&d);
         let motion = (!character.motions.is_empty()).then_some(0);
         let (head_filter, wand_filter) = (calibration.head_filter, calibration.wand_filter);
         let mut scheduler = scheduler;

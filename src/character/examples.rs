@@ -945,9 +945,10 @@ fn arm() -> Body {
         // Explicit Euler grows every lightly damped mode whose `h ω²` exceeds its damping rate;
         // the other examples' tissue damping absorbs that at 0.5 ms, the arm's light skin does
         // not: at 0.5 ms it diverged after 4.7 s of its motion (5.3 s at rest), at 0.4 ms after
-        // 12.9 s; 0.35 ms ran 60 s and 0.3 ms 120 s (session 28).
+        // 12.9 s; 0.35 ms ran 60 s and 0.3 ms 120 s (session 28). RK4 ran 30 s at 0.5 ms.
         simulation: SimulationDefaults {
             euler_step_s: 0.000_25,
+            rk4_step_s: Some(0.000_5),
             ..SimulationDefaults::default()
         },
     }

@@ -666,6 +666,35 @@ mod tests {
         assert!(m.contains("hold_contacts"), "{m}");
     }
 
+    /// RK4's own step is optional (a file without it steps RK4 at `euler_step_s`, as files
+    /// written before it existed did), written on save, and refused by name when not positive.
+    #[test]
+    fn rk4_step_is_optional_and_checked() {
+        let text = arm_text();
+        assert!(text.contains("rk4_step_s = 0.0005\n"), "saved: {text}");
+        let here = Path::new("rk4.toml");
+        let old = text.replace("rk4_step_s = 0.0005\n", "");
+        let c = Character::from_toml_str(&old, here).expect("an older file loads");
+        assert_eq!(c.simulation.rk4_step_s, None);
+        let t = crate::sim::surface::tolerances_of(&c.simulation);
+        assert_eq!(t.rk4_step_s, t.euler_step_s, "RK4 takes Euler's step");
+        let c = Character::from_toml_str(&text, here).expect("the arm loads");
+        let t = crate::sim::surface::tolerances_of(&c.simulation);
+        assert_eq!(
+            (t.euler_step_s, t.rk4_step_s),
+            (0.000_25f32.into(), 0.000_5f32.into())
+        );
+        for (bad, says) in [
+            ("0.0", "rk4_step_s must be > 0, got 0"),
+            ("-1e-3", "rk4_step_s must be finite and >= 0, got -0.001"),
+            ("inf", "rk4_step_s must be finite and >= 0, got inf"),
+        ] {
+            let m =
+                load_error(&text.replace("rk4_step_s = 0.0005", &format!("rk4_step_s = {bad}")));
+            assert!(m.contains(says), "{bad}: {m}");
+        }
+    }
+
     #[test]
     fn bad_spring_reference_is_named() {
         let text = arm_text();

@@ -75,6 +75,10 @@ pub struct SimulationDefaults {
     pub max_step_s: f32,
     /// Step of the fixed-step explicit Euler integrator, seconds.
     pub euler_step_s: f32,
+    /// Step of the fixed-step classical Runge-Kutta 4 integrator, seconds. Optional in files:
+    /// without it RK4 steps at `euler_step_s` (as files written before it existed did).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rk4_step_s: Option<f32>,
 }
 
 /// The re-check threshold of [`SimulationDefaults::recheck_fraction`] when a file gives none:
@@ -119,6 +123,7 @@ impl Default for SimulationDefaults {
             min_step_s: 1e-4,
             max_step_s: 0.016,
             euler_step_s: 0.0005,
+            rk4_step_s: None,
         }
     }
 }
@@ -137,6 +142,8 @@ impl SimulationDefaults {
             ("min_step_s", self.min_step_s),
             ("max_step_s", self.max_step_s),
             ("euler_step_s", self.euler_step_s),
+            // Absent, RK4 takes Euler's step, checked above.
+            ("rk4_step_s", self.rk4_step_s.unwrap_or(self.euler_step_s)),
         ];
         if !self.gravity_m_per_s2.is_finite() {
             return Err("simulation: gravity_m_per_s2 is not finite".into());
@@ -159,6 +166,7 @@ impl SimulationDefaults {
             ("v_threshold_m_per_s", self.v_threshold_m_per_s),
             ("min_step_s", self.min_step_s),
             ("euler_step_s", self.euler_step_s),
+            ("rk4_step_s", self.rk4_step_s.unwrap_or(self.euler_step_s)),
         ] {
             if v <= 0.0 {
                 return Err(format!("simulation: {name} must be > 0, got {v}"));

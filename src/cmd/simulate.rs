@@ -370,11 +370,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     .context("writing the report to standard output")?;
     if let Some(t) = report.stalled_at_s {
         // A fixed step that is too long for the skin diverges slowly, after a good start.
-        let fixed_step = if kind.is_adaptive() {
-            ""
-        } else {
-            "; with the fixed-step euler and rk4, also a step too long for the skin: try a \
-             smaller euler_step_s in the character's [simulation] or an adaptive integrator"
+        let fixed_step = match kind {
+            IntegratorKind::Euler => {
+                "; with explicit Euler, also a step too long for the skin: try a smaller \
+                 euler_step_s in the character's [simulation] or an adaptive integrator"
+            }
+            IntegratorKind::Rk4 => {
+                "; with RK4, also a step too long for the skin: try a smaller rk4_step_s in \
+                 the character's [simulation] or an adaptive integrator"
+            }
+            IntegratorKind::Verlet | IntegratorKind::Rk2 => "",
         };
         bail!(
             "the simulation stalled at t = {t:.4} s of {seconds} s: {} attempts in a row, \

@@ -166,7 +166,8 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     let mut t = state.tolerances;
     let mut min_ms = t.min_step_s * 1e3;
     let mut max_ms = t.max_step_s * 1e3;
-    let mut fixed_ms = t.fixed_step_s * 1e3;
+    let mut euler_ms = t.euler_step_s * 1e3;
+    let mut rk4_ms = t.rk4_step_s * 1e3;
     let mut changed = ui
         .add(
             slider(&mut t.position_tolerance, 1e-6..=1e-2)
@@ -191,15 +192,23 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         .changed();
     changed |= ui
         .add(
-            slider(&mut fixed_ms, 0.05..=10.0)
+            slider(&mut euler_ms, 0.05..=10.0)
                 .logarithmic(true)
-                .text("fixed step (ms)"),
+                .text("Euler step (ms)"),
+        )
+        .changed();
+    changed |= ui
+        .add(
+            slider(&mut rk4_ms, 0.05..=10.0)
+                .logarithmic(true)
+                .text("RK4 step (ms)"),
         )
         .changed();
     if changed {
         t.min_step_s = min_ms * 1e-3;
         t.max_step_s = (max_ms * 1e-3).max(t.min_step_s);
-        t.fixed_step_s = fixed_ms * 1e-3;
+        t.euler_step_s = euler_ms * 1e-3;
+        t.rk4_step_s = rk4_ms * 1e-3;
         state.tolerances = t;
         state.queue_change(ParameterChange::Tolerances(t));
     }

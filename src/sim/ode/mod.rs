@@ -108,13 +108,13 @@ pub trait SecondOrderSystem {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum IntegratorKind {
-    /// Explicit Euler, fixed step [`Tolerances::fixed_step_s`].
+    /// Explicit Euler, fixed step [`Tolerances::euler_step_s`].
     Euler,
     /// Adaptive leapfrog Verlet 2(1), LEMAN eq. 7-12.
     Verlet,
     /// Adaptive Runge-Kutta 2(1) (Heun with embedded Euler).
     Rk2,
-    /// Classical Runge-Kutta 4, fixed step [`Tolerances::fixed_step_s`].
+    /// Classical Runge-Kutta 4, fixed step [`Tolerances::rk4_step_s`].
     Rk4,
 }
 
@@ -152,8 +152,11 @@ impl IntegratorKind {
 /// `1 / max(|value|, threshold)` (eq. 8): absolute below the threshold, relative above.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Tolerances {
-    /// Step of the fixed-step methods (Euler, RK4), seconds.
-    pub fixed_step_s: f64,
+    /// Step of explicit Euler (fixed step), seconds.
+    pub euler_step_s: f64,
+    /// Step of classical Runge-Kutta 4 (fixed step), seconds. Its own setting: RK4 stays
+    /// stable at steps where explicit Euler slowly diverges.
+    pub rk4_step_s: f64,
     /// Smallest step the adaptive methods take, seconds. A step at this size is accepted
     /// whatever its error (and counted as forced).
     pub min_step_s: f64,
@@ -182,6 +185,17 @@ pub struct Tolerances {
 pub const MAX_VELOCITY_ITERATIONS: u32 = 1000;
 
 impl Tolerances {
+    /// The step of a fixed-step method ([`Tolerances::euler_step_s`] or
+    /// [`Tolerances::rk4_step_s`]); for the adaptive methods, which have none, Euler's.
+    pub fn fixed_step_s(&self, kind: IntegratorKind) -> f64 {
+        match kind {
+            IntegratorKind::Rk4 => self.rk4_step_s,
+            IntegratorKind::Euler | IntegratorKind::Verlet | IntegratorKind::Rk2 => {
+                self.euler_step_s
+            }
+        }
+    }
+
     /// Whether `step_s` is the smallest step (within rounding), where an adaptive method accepts
     /// any finite error (counted as forced).
     pub fn at_min_step(&self, step_s: f64) -> bool {
@@ -196,7 +210,8 @@ impl Tolerances {
     /// evaluation, and an attempt must end).
     pub fn check(&self) -> Result<(), String> {
         for (name, v) in [
-            ("fixed_step_s", self.fixed_step_s),
+            ("euler_step_s", self.euler_step_s),
+            ("rk4_step_s", self.rk4_step_s),
             ("min_step_s", self.min_step_s),
             ("max_step_s", self.max_step_s),
             ("position_tolerance", self.position_tolerance),
@@ -252,7 +267,8 @@ impl Tolerances {
 impl Default for Tolerances {
     fn default() -> Self {
         Self {
-            fixed_step_s: 0.002,
+            euler_step_s: 0.002,
+            rk4_step_s: 0.002,
             min_step_s: 0.000_5,
             max_step_s: 0.016,
             position_tolerance: 1.0e-4,
@@ -315,15 +331,16 @@ impl Integrator {
         self.kind = kind;
     }
 
-    /// The step to start with for the current method: the fixed step, or for the adaptive
-    /// methods the fixed step clamped into `[min_step_s, max_step_s]`.
+    /// The step to start with for the current method: its fixed step
+    /// ([`Tolerances::fixed_step_s`]), or for the adaptive methods Euler's step clamped into
+    /// `[min_step_s, max_step_s]`.
     pub fn initial_step_s(&self) -> f64 {
         let t = &self.tolerances;
+        let fixed = t.fixed_step_s(self.kind);
         if self.kind.is_adaptive() {
-            t.fixed_step_s
-                .clamp(t.min_step_s, t.max_step_s.max(t.min_step_s))
+            fixed.clamp(t.min_step_s, t.max_step_s.max(t.min_step_s))
         } else {
-            t.fixed_step_s
+            fixed
         }
     }
 
@@ -378,7 +395,7 @@ impl Integrator {
             error_ratio: 0.0,
             accepted: true,
             forced: false,
-            next_step_s: self.tolerances.fixed_step_s,
+            next_step_s: self.tolerances.fixed_step_s(self.kind),
             position_evals,
             velocity_evals: 0,
         }

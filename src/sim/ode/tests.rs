@@ -43,7 +43,8 @@ fn exact_velocity(omega: f64, c: f64, t: f64) -> f64 {
 /// Tolerances that force a fixed step `h` for every method.
 fn fixed_step(h: f64) -> Tolerances {
     Tolerances {
-        fixed_step_s: h,
+        euler_step_s: h,
+        rk4_step_s: h,
         min_step_s: h,
         max_step_s: h,
         velocity_tolerance: 1e-7,
@@ -291,7 +292,7 @@ fn adaptive_methods_meet_tighter_tolerances_with_smaller_steps() {
                 n: 1,
             };
             let t = Tolerances {
-                fixed_step_s: 0.5,
+                euler_step_s: 0.5,
                 min_step_s: 1e-4,
                 max_step_s: 1.0,
                 position_tolerance: tol,
@@ -383,7 +384,7 @@ impl SecondOrderSystem for OnFloor {
 /// the step): steps between 0.5 and 16 ms.
 fn floor_tolerances() -> Tolerances {
     Tolerances {
-        fixed_step_s: 0.004,
+        euler_step_s: 0.004,
         min_step_s: 0.000_5,
         max_step_s: 0.016,
         position_tolerance: 1.0e-4,
@@ -516,13 +517,14 @@ fn contact_aware_error_drops_only_the_inward_part() {
 fn tolerances_out_of_range_are_named() {
     assert_eq!(Tolerances::default().check(), Ok(()));
     type Spoil = fn(&mut Tolerances);
-    let cases: [(Spoil, &str); 12] = [
+    let cases: [(Spoil, &str); 13] = [
         (|t| t.min_step_s = 0.0, "min_step_s"),
         // Finite in f64 but not in the simulator's f32.
         (|t| t.max_step_s = 1e300, "max_step_s"),
         (|t| t.velocity_tolerance = 1e-300, "velocity_tolerance"),
         (|t| t.position_tolerance = f64::NAN, "position_tolerance"),
-        (|t| t.fixed_step_s = f64::INFINITY, "fixed_step_s"),
+        (|t| t.euler_step_s = f64::INFINITY, "euler_step_s"),
+        (|t| t.rk4_step_s = 0.0, "rk4_step_s"),
         (|t| t.max_step_s = 1e-5, "below min_step_s"),
         (|t| t.safety = 1.5, "safety"),
         (|t| t.max_shrink = 1.0, "max_shrink"),
@@ -544,5 +546,28 @@ fn tolerances_out_of_range_are_named() {
         spoil(&mut t);
         let err = t.check().expect_err(name);
         assert!(err.contains(name), "{name}: {err}");
+    }
+}
+
+#[test]
+fn the_fixed_step_methods_each_take_their_own_step() {
+    let t = Tolerances {
+        euler_step_s: 0.001,
+        rk4_step_s: 0.004,
+        ..Tolerances::default()
+    };
+    let mut sys = Oscillator {
+        omega: 1.0,
+        c: 0.0,
+        n: 1,
+    };
+    for (kind, want) in [(IntegratorKind::Euler, 0.001), (IntegratorKind::Rk4, 0.004)] {
+        assert_eq!(t.fixed_step_s(kind), want, "{kind:?}");
+        let mut integ = Integrator::new(kind, t);
+        assert_eq!(integ.initial_step_s(), want, "{kind:?}");
+        let (mut xn, mut vn) = ([0.0f32], [0.0f32]);
+        let p = integ.propose(&mut sys, 0.0, want, &[1.0], &[0.0], &mut xn, &mut vn);
+        assert!(p.accepted, "{kind:?}");
+        assert_eq!(p.next_step_s, want, "{kind:?}");
     }
 }

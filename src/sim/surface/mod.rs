@@ -41,7 +41,7 @@ use super::{
     AdvanceEnd, AdvanceReport, DeformationModel, ParameterChange, PoseSource, Selection, SimError,
     Snapshot, StepBudget, SurfaceMesh, TIME_RESOLUTION_S,
 };
-use crate::character::{Character, Posture, ShapeInstance, SkeletonPose};
+use crate::character::{Character, Posture, ShapeInstance, SimulationDefaults, SkeletonPose};
 use crate::clock::Clock;
 use anchors::AnchorTable;
 use constraints::{Broadphase, ConstraintInput};
@@ -850,16 +850,7 @@ impl Core {
             springs.anchor_rest_m.push(t.anchor_rest_m);
         }
         let d = character.simulation;
-        let tolerances = Tolerances {
-            fixed_step_s: f64::from(d.euler_step_s),
-            min_step_s: f64::from(d.min_step_s),
-            max_step_s: f64::from(d.max_step_s),
-            position_tolerance: f64::from(d.epsilon_r),
-            velocity_tolerance: f64::from(d.epsilon_v),
-            position_threshold_m: f64::from(d.r_threshold_m),
-            velocity_threshold_m_per_s: f64::from(d.v_threshold_m_per_s),
-            ..Tolerances::default()
-        };
+        let tolerances = tolerances_of(&d);
         let step_s = initial_step(kind, &tolerances);
         Ok(Self {
             around: m,
@@ -918,6 +909,23 @@ impl Core {
         } else {
             self.x.clone()
         }
+    }
+}
+
+/// The step control a character's `[simulation]` section asks for (steps in seconds; what the
+/// file does not set keeps [`Tolerances::default`]). A file without `rk4_step_s` steps RK4 at
+/// `euler_step_s`, as before the two were separate.
+pub fn tolerances_of(d: &SimulationDefaults) -> Tolerances {
+    Tolerances {
+        euler_step_s: f64::from(d.euler_step_s),
+        rk4_step_s: f64::from(d.rk4_step_s.unwrap_or(d.euler_step_s)),
+        min_step_s: f64::from(d.min_step_s),
+        max_step_s: f64::from(d.max_step_s),
+        position_tolerance: f64::from(d.epsilon_r),
+        velocity_tolerance: f64::from(d.epsilon_v),
+        position_threshold_m: f64::from(d.r_threshold_m),
+        velocity_threshold_m_per_s: f64::from(d.v_threshold_m_per_s),
+        ..Tolerances::default()
     }
 }
 
@@ -1097,7 +1105,7 @@ impl DeformationModel for SurfaceModel {
                     self.core.step_s = next_s.min(safety * h).max(min_step);
                     if !self.core.kind.is_adaptive() {
                         // A fixed-step method only "rejects" on a bug; do not loop.
-                        self.core.step_s = self.core.tolerances.fixed_step_s;
+                        self.core.step_s = self.core.tolerances.fixed_step_s(self.core.kind);
                     }
                 }
                 Attempt::ConstraintRejected { retry_s } => {
@@ -1129,7 +1137,7 @@ impl DeformationModel for SurfaceModel {
         }
         // Fixed-step methods return to their fixed step after a constraint-limited step.
         if !self.core.kind.is_adaptive() {
-            self.core.step_s = self.core.tolerances.fixed_step_s;
+            self.core.step_s = self.core.tolerances.fixed_step_s(self.core.kind);
         }
         // The guard scans each step before its constraint phase; the projection and eq. 13 run
         // after it. A state they left non-finite (no valid parameters are known to do so since
