@@ -129,6 +129,12 @@ impl Default for SimulationDefaults {
 }
 
 impl SimulationDefaults {
+    /// The step RK4 takes, seconds: [`SimulationDefaults::rk4_step_s`], or without it
+    /// `euler_step_s` (as files written before RK4 had its own step).
+    pub fn rk4_step_or_euler_s(&self) -> f32 {
+        self.rk4_step_s.unwrap_or(self.euler_step_s)
+    }
+
     fn validate(&self) -> Result<(), String> {
         let scalars = [
             ("k_parallel", self.k_parallel),
@@ -143,7 +149,7 @@ impl SimulationDefaults {
             ("max_step_s", self.max_step_s),
             ("euler_step_s", self.euler_step_s),
             // Absent, RK4 takes Euler's step, checked above.
-            ("rk4_step_s", self.rk4_step_s.unwrap_or(self.euler_step_s)),
+            ("rk4_step_s", self.rk4_step_or_euler_s()),
         ];
         if !self.gravity_m_per_s2.is_finite() {
             return Err("simulation: gravity_m_per_s2 is not finite".into());
@@ -166,7 +172,7 @@ impl SimulationDefaults {
             ("v_threshold_m_per_s", self.v_threshold_m_per_s),
             ("min_step_s", self.min_step_s),
             ("euler_step_s", self.euler_step_s),
-            ("rk4_step_s", self.rk4_step_s.unwrap_or(self.euler_step_s)),
+            ("rk4_step_s", self.rk4_step_or_euler_s()),
         ] {
             if v <= 0.0 {
                 return Err(format!("simulation: {name} must be > 0, got {v}"));

@@ -371,16 +371,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(t) = report.stalled_at_s {
         // A fixed step that is too long for the skin diverges slowly, after a good start.
         let fixed_step = match kind {
-            IntegratorKind::Euler => {
-                "; with explicit Euler, also a step too long for the skin: try a smaller \
-                 euler_step_s in the character's [simulation] or an adaptive integrator"
-            }
-            IntegratorKind::Rk4 => {
-                "; with RK4, also a step too long for the skin: try a smaller rk4_step_s in \
-                 the character's [simulation] or an adaptive integrator"
-            }
-            IntegratorKind::Verlet | IntegratorKind::Rk2 => "",
-        };
+            IntegratorKind::Euler => Some("euler_step_s"),
+            IntegratorKind::Rk4 => Some("rk4_step_s"),
+            IntegratorKind::Verlet | IntegratorKind::Rk2 => None,
+        }
+        .map(|field| {
+            format!(
+                "; with a fixed-step integrator, also a step too long for the skin: try a \
+                 smaller {field} in the character's [simulation] or an adaptive integrator"
+            )
+        })
+        .unwrap_or_default();
         bail!(
             "the simulation stalled at t = {t:.4} s of {seconds} s: {} attempts in a row, \
              shrinking to the minimum step, were non-finite or exploding, so the last good \

@@ -37,6 +37,24 @@ fn slider<Num: egui::emath::Numeric>(
     egui::Slider::new(value, range).clamping(egui::SliderClamping::Edits)
 }
 
+/// A logarithmic slider over a step held in seconds and shown in milliseconds; whether it
+/// changed (only then is the step written back).
+fn step_ms_slider(
+    ui: &mut egui::Ui,
+    step_s: &mut f64,
+    range_ms: std::ops::RangeInclusive<f64>,
+    label: &str,
+) -> bool {
+    let mut ms = *step_s * 1e3;
+    let changed = ui
+        .add(slider(&mut ms, range_ms).logarithmic(true).text(label))
+        .changed();
+    if changed {
+        *step_s = ms * 1e-3;
+    }
+    changed
+}
+
 /// The toolbar: tool slots (only navigation works yet) and the simulation switch.
 pub fn toolbar_ui(ui: &mut egui::Ui, state: &mut AppState) {
     ui.horizontal_wrapped(|ui| {
@@ -164,10 +182,6 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         state.queue_change(ParameterChange::Integrator(integrator));
     }
     let mut t = state.tolerances;
-    let mut min_ms = t.min_step_s * 1e3;
-    let mut max_ms = t.max_step_s * 1e3;
-    let mut euler_ms = t.euler_step_s * 1e3;
-    let mut rk4_ms = t.rk4_step_s * 1e3;
     let mut changed = ui
         .add(
             slider(&mut t.position_tolerance, 1e-6..=1e-2)
@@ -176,39 +190,12 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
                 .text("position tolerance ε_r"),
         )
         .changed();
-    changed |= ui
-        .add(
-            slider(&mut min_ms, 0.01..=5.0)
-                .logarithmic(true)
-                .text("min step (ms)"),
-        )
-        .changed();
-    changed |= ui
-        .add(
-            slider(&mut max_ms, 0.1..=40.0)
-                .logarithmic(true)
-                .text("max step (ms)"),
-        )
-        .changed();
-    changed |= ui
-        .add(
-            slider(&mut euler_ms, 0.05..=10.0)
-                .logarithmic(true)
-                .text("Euler step (ms)"),
-        )
-        .changed();
-    changed |= ui
-        .add(
-            slider(&mut rk4_ms, 0.05..=10.0)
-                .logarithmic(true)
-                .text("RK4 step (ms)"),
-        )
-        .changed();
+    changed |= step_ms_slider(ui, &mut t.min_step_s, 0.01..=5.0, "min step (ms)");
+    changed |= step_ms_slider(ui, &mut t.max_step_s, 0.1..=40.0, "max step (ms)");
+    changed |= step_ms_slider(ui, &mut t.euler_step_s, 0.05..=10.0, "Euler step (ms)");
+    changed |= step_ms_slider(ui, &mut t.rk4_step_s, 0.05..=10.0, "RK4 step (ms)");
     if changed {
-        t.min_step_s = min_ms * 1e-3;
-        t.max_step_s = (max_ms * 1e-3).max(t.min_step_s);
-        t.euler_step_s = euler_ms * 1e-3;
-        t.rk4_step_s = rk4_ms * 1e-3;
+        t.max_step_s = t.max_step_s.max(t.min_step_s);
         state.tolerances = t;
         state.queue_change(ParameterChange::Tolerances(t));
     }

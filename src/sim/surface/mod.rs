@@ -918,7 +918,7 @@ impl Core {
 pub fn tolerances_of(d: &SimulationDefaults) -> Tolerances {
     Tolerances {
         euler_step_s: f64::from(d.euler_step_s),
-        rk4_step_s: f64::from(d.rk4_step_s.unwrap_or(d.euler_step_s)),
+        rk4_step_s: f64::from(d.rk4_step_or_euler_s()),
         min_step_s: f64::from(d.min_step_s),
         max_step_s: f64::from(d.max_step_s),
         position_tolerance: f64::from(d.epsilon_r),
