@@ -118,6 +118,24 @@ pub fn write_all(dir: &Path) -> Result<Vec<std::path::PathBuf>, CharacterFileErr
     Ok(written)
 }
 
+/// The examples' RK4 step, seconds. RK4's stability region reaches along the imaginary axis
+/// (to `h ω ≈ 2.8`), so unlike explicit Euler it needs no damping to step the skin stably:
+/// every example ran 30 s of its motion at 2 and at 4 ms, and 10 s at 8 ms. Against an RK4
+/// run at 0.125 ms, 2.3 s into each 32×32 example's motion, 2 ms leaves an RMS position error
+/// no larger than the adaptive Verlet's at its default tolerances (torso 0.18 mm vs 0.29,
+/// penguin 0.19 vs 0.34, wombat 0.25 vs 0.49, arm 1.9 vs 4.3); 4 ms is about Verlet's, 8 ms
+/// worse (wombat 0.57). The contacts, not the step, set the error floor: halving the step
+/// below 2 ms does not shrink it much (session 29).
+const EXAMPLE_RK4_STEP_S: f32 = 0.002;
+
+/// The simulation settings every example starts from.
+fn example_simulation() -> SimulationDefaults {
+    SimulationDefaults {
+        rk4_step_s: Some(EXAMPLE_RK4_STEP_S),
+        ..SimulationDefaults::default()
+    }
+}
+
 /// A body before its skin is made.
 struct Body {
     name: &'static str,
@@ -389,7 +407,7 @@ fn penguin() -> Body {
             smooth_passes: 3,
             fat_m: |s, angle| 0.015 + 0.01 * (PI * s).sin() * (0.5 + 0.5 * angle.sin()),
         },
-        simulation: SimulationDefaults::default(),
+        simulation: example_simulation(),
     }
 }
 
@@ -548,7 +566,7 @@ fn wombat() -> Body {
             smooth_passes: 3,
             fat_m: |s, angle| 0.012 + 0.008 * (PI * s).sin() * (0.5 - 0.5 * angle.sin()),
         },
-        simulation: SimulationDefaults::default(),
+        simulation: example_simulation(),
     }
 }
 
@@ -876,7 +894,7 @@ fn torso() -> Body {
             fat_m: |s, angle| 0.008 + 0.008 * (1.0 - s) * (0.5 + 0.5 * angle.sin()),
             smooth_passes: 12,
         },
-        simulation: SimulationDefaults::default(),
+        simulation: example_simulation(),
     }
 }
 
@@ -945,11 +963,10 @@ fn arm() -> Body {
         // Explicit Euler grows every lightly damped mode whose `h ω²` exceeds its damping rate;
         // the other examples' tissue damping absorbs that at 0.5 ms, the arm's light skin does
         // not: at 0.5 ms it diverged after 4.7 s of its motion (5.3 s at rest), at 0.4 ms after
-        // 12.9 s; 0.35 ms ran 60 s and 0.3 ms 120 s (session 28). RK4 ran 30 s at 0.5 ms.
+        // 12.9 s; 0.35 ms ran 60 s and 0.3 ms 120 s (session 28).
         simulation: SimulationDefaults {
             euler_step_s: 0.000_25,
-            rk4_step_s: Some(0.000_5),
-            ..SimulationDefaults::default()
+            ..example_simulation()
         },
     }
 }

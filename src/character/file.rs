@@ -671,9 +671,9 @@ mod tests {
     #[test]
     fn rk4_step_is_optional_and_checked() {
         let text = arm_text();
-        assert!(text.contains("rk4_step_s = 0.0005\n"), "saved: {text}");
+        assert!(text.contains("rk4_step_s = 0.002\n"), "saved: {text}");
         let here = Path::new("rk4.toml");
-        let old = text.replace("rk4_step_s = 0.0005\n", "");
+        let old = text.replace("rk4_step_s = 0.002\n", "");
         let c = Character::from_toml_str(&old, here).expect("an older file loads");
         assert_eq!(c.simulation.rk4_step_s, None);
         let t = crate::sim::surface::tolerances_of(&c.simulation);
@@ -682,15 +682,14 @@ mod tests {
         let t = crate::sim::surface::tolerances_of(&c.simulation);
         assert_eq!(
             (t.euler_step_s, t.rk4_step_s),
-            (0.000_25f32.into(), 0.000_5f32.into())
+            (0.000_25f32.into(), 0.002f32.into())
         );
         for (bad, says) in [
             ("0.0", "rk4_step_s must be > 0, got 0"),
             ("-1e-3", "rk4_step_s must be finite and >= 0, got -0.001"),
             ("inf", "rk4_step_s must be finite and >= 0, got inf"),
         ] {
-            let m =
-                load_error(&text.replace("rk4_step_s = 0.0005", &format!("rk4_step_s = {bad}")));
+            let m = load_error(&text.replace("rk4_step_s = 0.002", &format!("rk4_step_s = {bad}")));
             assert!(m.contains(says), "{bad}: {m}");
         }
     }

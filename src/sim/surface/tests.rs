@@ -475,7 +475,7 @@ fn integrators_switch_at_run_time_and_all_follow_the_motion() {
         if !kind.is_adaptive() {
             let fixed = m.tolerances().fixed_step_s(kind);
             assert!(r.max_step_s <= fixed * 1.000_001, "{kind:?}: {r:?}");
-            // The arm steps RK4 at 0.5 ms and Euler at 0.25 ms: each takes its own.
+            // The arm steps RK4 at 2 ms and Euler at 0.25 ms: each takes its own.
             assert!(r.max_step_s >= fixed * 0.999_999, "{kind:?}: {r:?}");
         }
     }
