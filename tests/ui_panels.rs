@@ -248,7 +248,7 @@ fn the_hold_checkbox_switches_resting_contact_in_the_running_simulation() {
 
 #[test]
 fn a_stalled_simulation_says_so_in_the_panel_and_a_running_one_does_not() {
-    let stalled = |moved_m: f32| {
+    let stalled = |moved_m: f32, kind: IntegratorKind| {
         let (state, clock) = state_with(|c| {
             // Every tissue spring stretched by `moved_m`: out of range at any step size.
             for s in &mut c.shapes {
@@ -256,6 +256,10 @@ fn a_stalled_simulation_says_so_in_the_panel_and_a_running_one_does_not() {
             }
         });
         let mut h = harness(state);
+        // As the panel's integrator menu does.
+        h.state_mut().integrator = kind;
+        h.state_mut()
+            .queue_change(ParameterChange::Integrator(kind));
         let mut renderer = CountingRenderer(0);
         // Past the scheduler's ratio window, so the ratio line gives its verdict.
         let window = h.state().scheduler.config().ratio_window_frames as u32;
@@ -272,10 +276,20 @@ fn a_stalled_simulation_says_so_in_the_panel_and_a_running_one_does_not() {
             .query_by_label_contains("NOT held: the simulation stalled")
             .is_some();
         let blamed = h.query_by_label_contains("machine too slow").is_some();
-        (h.state().sim_stalled_at_s, shown, said, blamed)
+        // Only a fixed-step method is told about its step.
+        let step = h
+            .query_by_label_contains("shorten the Euler step")
+            .is_some();
+        (h.state().sim_stalled_at_s, shown, said, blamed, step)
     };
-    assert_eq!(stalled(1000.0), (Some(0.0), true, true, false));
-    assert_eq!(stalled(0.0), (None, false, false, false));
+    let verlet = IntegratorKind::Verlet;
+    assert_eq!(
+        stalled(1000.0, verlet),
+        (Some(0.0), true, true, false, false)
+    );
+    assert_eq!(stalled(0.0, verlet), (None, false, false, false, false));
+    let euler = IntegratorKind::Euler;
+    assert_eq!(stalled(1000.0, euler), (Some(0.0), true, true, false, true));
 }
 
 /// Drawing the panels changes nothing by itself: values the character file may hold that a

@@ -74,6 +74,9 @@ pub struct ReplaySummary {
     pub records: Vec<FrameRecord>,
     /// The render adapter used.
     pub adapter: String,
+    /// The integrator of the first frame in which the simulation stalled, if any did (what
+    /// the stall advice depends on, [`crate::sim::surface::stall_advice`]).
+    pub stall_integrator: Option<crate::sim::ode::IntegratorKind>,
 }
 
 /// Why a replay failed.
@@ -187,6 +190,7 @@ pub fn replay_headless(
     let mut records = Vec::with_capacity(frames as usize);
     let mut pngs = Vec::new();
     let every = u64::from(settings.png_every.max(1));
+    let mut stall_integrator = None;
     for n in 0..frames {
         // Read back only the frames that are written (a readback counts as render time).
         renderer.capture = settings.frames_dir.is_some() && n % every == 0;
@@ -206,6 +210,9 @@ pub fn replay_headless(
             })?;
             pngs.push(path);
         }
+        if record.sim_stalled && stall_integrator.is_none() {
+            stall_integrator = Some(state.integrator);
+        }
         records.push(record);
     }
     if let Some(path) = &settings.log_path {
@@ -216,6 +223,7 @@ pub fn replay_headless(
         pngs,
         records,
         adapter: gpu.summary.to_string(),
+        stall_integrator,
     })
 }
 

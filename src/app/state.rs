@@ -598,8 +598,10 @@ impl AppState {
         if stalled {
             if self.sim_stalled_at_s.is_none() {
                 tracing::warn!(
-                    "the simulation stalled at t = {:.4} s: every attempt was non-finite or exploding",
-                    report.time_s
+                    "the simulation stalled at t = {:.4} s: every attempt was non-finite or \
+                     exploding ({})",
+                    report.time_s,
+                    crate::sim::surface::stall_advice(self.integrator)
                 );
             }
             self.sim_stalled_at_s = Some(report.time_s);

@@ -135,9 +135,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
         if let Some(first) = summary.records.iter().find(|r| r.sim_stalled) {
+            let advice = summary
+                .stall_integrator
+                .map(leman::sim::surface::stall_advice)
+                .unwrap_or_default();
             println!(
                 "warning: the simulation stalled in {} of {} frames, first at t = {:.4} s (every \
-                 attempt non-finite or exploding: the character's forces are out of range)",
+                 attempt non-finite or exploding: {advice})",
                 stalled_frames, summary.frames, first.sim_time_s
             );
         }

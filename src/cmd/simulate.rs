@@ -369,25 +369,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     .context("writing the report to standard output")?;
     if let Some(t) = report.stalled_at_s {
-        // A fixed step that is too long for the skin diverges slowly, after a good start.
-        let fixed_step = match kind {
-            IntegratorKind::Euler => Some("euler_step_s"),
-            IntegratorKind::Rk4 => Some("rk4_step_s"),
-            IntegratorKind::Verlet | IntegratorKind::Rk2 => None,
-        }
-        .map(|field| {
-            format!(
-                "; with a fixed-step integrator, also a step too long for the skin: try a \
-                 smaller {field} in the character's [simulation] or an adaptive integrator"
-            )
-        })
-        .unwrap_or_default();
         bail!(
             "the simulation stalled at t = {t:.4} s of {seconds} s: {} attempts in a row, \
              shrinking to the minimum step, were non-finite or exploding, so the last good \
-             state was kept (the character's forces are out of range: look for a huge \
-             stiffness, a tiny mass, or a shape or tissue anchor far from the skin{fixed_step})",
-            leman::sim::surface::GUARD_ATTEMPTS
+             state was kept ({})",
+            leman::sim::surface::GUARD_ATTEMPTS,
+            leman::sim::surface::stall_advice(kind)
         );
     }
     if let Some(k) = interrupted_run {

@@ -160,12 +160,22 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         ui.colored_label(egui::Color32::from_rgb(230, 120, 60), e);
     }
     if let Some(t) = state.sim_stalled_at_s {
+        // A fixed step too long for the skin diverges slowly, after a good start.
+        let step = match state.integrator {
+            IntegratorKind::Euler => {
+                " Or shorten the Euler step below, or pick an adaptive integrator."
+            }
+            IntegratorKind::Rk4 => {
+                " Or shorten the RK4 step below, or pick an adaptive integrator."
+            }
+            IntegratorKind::Verlet | IntegratorKind::Rk2 => "",
+        };
         ui.colored_label(
             egui::Color32::from_rgb(230, 80, 60),
             format!(
                 "Stalled at t = {t:.3} s: every step, down to the minimum, was non-finite or \
                  exploding, so the skin is held at its last good state. Lower a stiffness, \
-                 raise a mass or move a muscle nearer the skin."
+                 raise a mass or move a muscle nearer the skin.{step}"
             ),
         );
     }

@@ -146,6 +146,17 @@ impl IntegratorKind {
     pub fn is_adaptive(self) -> bool {
         matches!(self, IntegratorKind::Verlet | IntegratorKind::Rk2)
     }
+
+    /// The character file's `[simulation]` field that sets this method's fixed step
+    /// (`euler_step_s`, `rk4_step_s`), or `None` for the adaptive methods, which choose their
+    /// own.
+    pub fn fixed_step_field(self) -> Option<&'static str> {
+        match self {
+            IntegratorKind::Euler => Some("euler_step_s"),
+            IntegratorKind::Rk4 => Some("rk4_step_s"),
+            IntegratorKind::Verlet | IntegratorKind::Rk2 => None,
+        }
+    }
 }
 
 /// Step-size control parameters (LEMAN 4.2.1-4.2.2). Errors are scaled per component by

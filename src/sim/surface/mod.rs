@@ -1313,6 +1313,23 @@ pub const MAX_RECHECK_PASSES: u32 = 8;
 /// fifth to the eighth attempts are all at the minimum.
 pub const GUARD_ATTEMPTS: u32 = 8;
 
+/// What to look at when the simulation stalls (its guard gave up, [`AdvanceEnd::Stalled`])
+/// with integrator `kind`: one clause, for the end of a message. Out-of-range forces stall any
+/// method; a fixed step too long for the skin also stalls a fixed-step method, slowly, after a
+/// good start (explicit Euler gains energy in every lightly damped mode).
+pub fn stall_advice(kind: IntegratorKind) -> String {
+    let forces = "the character's forces are out of range: look for a huge stiffness, a tiny \
+                  mass, or a shape or tissue anchor far from the skin";
+    match kind.fixed_step_field() {
+        Some(field) => format!(
+            "{forces}; with {} (fixed step), also a step too long for the skin: try a smaller \
+             {field} in the character's [simulation] or an adaptive integrator",
+            kind.name()
+        ),
+        None => forces.to_string(),
+    }
+}
+
 /// The constraint phase on the candidate in `w.x_new`/`w.v_new`: one full pass, then re-check
 /// passes over corrected neighbourhoods with refreshed normals until nothing moves (at most
 /// [`MAX_RECHECK_PASSES`]). Shared by the real step and the benchmark hook so both measure the

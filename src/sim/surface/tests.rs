@@ -1031,3 +1031,25 @@ fn rechecks_settle_before_their_limit() {
         );
     }
 }
+
+/// The stall advice blames the forces for every method, and a fixed-step method's own step by
+/// its file field too.
+#[test]
+fn stall_advice_names_the_step_of_a_fixed_step_method_only() {
+    for kind in IntegratorKind::ALL {
+        let advice = stall_advice(kind);
+        assert!(
+            advice.contains("forces are out of range"),
+            "{kind:?}: {advice}"
+        );
+        match kind.fixed_step_field() {
+            Some(field) => assert!(
+                advice.contains(&format!("a smaller {field}")) && advice.contains(kind.name()),
+                "{kind:?}: {advice}"
+            ),
+            None => assert!(!advice.contains("step"), "{kind:?}: {advice}"),
+        }
+    }
+    assert_eq!(IntegratorKind::Rk4.fixed_step_field(), Some("rk4_step_s"));
+    assert_eq!(IntegratorKind::Rk2.fixed_step_field(), None);
+}
