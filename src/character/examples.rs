@@ -125,7 +125,8 @@ pub fn write_all(dir: &Path) -> Result<Vec<std::path::PathBuf>, CharacterFileErr
 /// no larger than the adaptive Verlet's at its default tolerances (torso 0.18 mm vs 0.29,
 /// penguin 0.19 vs 0.34, wombat 0.25 vs 0.49, arm 1.9 vs 4.3); 4 ms is about Verlet's, 8 ms
 /// worse (wombat 0.57). The contacts, not the step, set the error floor: halving the step
-/// below 2 ms does not shrink it much (session 29).
+/// below 2 ms does not shrink it much. The 16×16 skins' errors are larger and noisier, and
+/// there 2 ms is about Verlet's (0.3-1.7 of it; see docs/simulate.md, "Step control").
 const EXAMPLE_RK4_STEP_S: f32 = 0.002;
 
 /// The simulation settings every example starts from.
