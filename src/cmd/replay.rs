@@ -134,15 +134,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 other * 1e3
             );
         }
-        if let Some(first) = summary.records.iter().find(|r| r.sim_stalled) {
-            let advice = summary
-                .stall_integrator
-                .map(leman::sim::surface::stall_advice)
-                .unwrap_or_default();
+        let first = summary.records.iter().find(|r| r.sim_stalled);
+        if let (Some(first), Some(kind)) = (first, summary.stall_integrator) {
             println!(
                 "warning: the simulation stalled in {} of {} frames, first at t = {:.4} s (every \
-                 attempt non-finite or exploding: {advice})",
-                stalled_frames, summary.frames, first.sim_time_s
+                 attempt non-finite or exploding: {})",
+                stalled_frames,
+                summary.frames,
+                first.sim_time_s,
+                leman::sim::surface::stall_advice(kind)
             );
         }
     }

@@ -37,6 +37,10 @@ fn slider<Num: egui::emath::Numeric>(
     egui::Slider::new(value, range).clamping(egui::SliderClamping::Edits)
 }
 
+/// Labels of the fixed-step methods' step sliders (a stall names the one to shorten).
+const EULER_STEP_LABEL: &str = "Euler step (ms)";
+const RK4_STEP_LABEL: &str = "RK4 step (ms)";
+
 /// A logarithmic slider over a step held in seconds and shown in milliseconds; whether it
 /// changed (only then is the step written back).
 fn step_ms_slider(
@@ -161,21 +165,20 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
     }
     if let Some(t) = state.sim_stalled_at_s {
         // A fixed step too long for the skin diverges slowly, after a good start.
-        let step = match state.integrator {
-            IntegratorKind::Euler => {
-                " Or shorten the Euler step below, or pick an adaptive integrator."
-            }
-            IntegratorKind::Rk4 => {
-                " Or shorten the RK4 step below, or pick an adaptive integrator."
-            }
-            IntegratorKind::Verlet | IntegratorKind::Rk2 => "",
+        let step_slider = match state.integrator {
+            IntegratorKind::Euler => Some(EULER_STEP_LABEL),
+            IntegratorKind::Rk4 => Some(RK4_STEP_LABEL),
+            IntegratorKind::Verlet | IntegratorKind::Rk2 => None,
         };
+        let hint = step_slider
+            .map(|label| format!(" Or shorten the {label} below, or pick an adaptive integrator."))
+            .unwrap_or_default();
         ui.colored_label(
             egui::Color32::from_rgb(230, 80, 60),
             format!(
                 "Stalled at t = {t:.3} s: every step, down to the minimum, was non-finite or \
-                 exploding, so the skin is held at its last good state. Lower a stiffness, \
-                 raise a mass or move a muscle nearer the skin.{step}"
+                 exploding, so the skin is held at its last good state ({}).{hint}",
+                crate::sim::surface::STALL_FORCES_ADVICE
             ),
         );
     }
@@ -202,8 +205,8 @@ pub fn simulation_ui(ui: &mut egui::Ui, state: &mut AppState) {
         .changed();
     changed |= step_ms_slider(ui, &mut t.min_step_s, 0.01..=5.0, "min step (ms)");
     changed |= step_ms_slider(ui, &mut t.max_step_s, 0.1..=40.0, "max step (ms)");
-    changed |= step_ms_slider(ui, &mut t.euler_step_s, 0.05..=10.0, "Euler step (ms)");
-    changed |= step_ms_slider(ui, &mut t.rk4_step_s, 0.05..=10.0, "RK4 step (ms)");
+    changed |= step_ms_slider(ui, &mut t.euler_step_s, 0.05..=10.0, EULER_STEP_LABEL);
+    changed |= step_ms_slider(ui, &mut t.rk4_step_s, 0.05..=10.0, RK4_STEP_LABEL);
     if changed {
         t.max_step_s = t.max_step_s.max(t.min_step_s);
         state.tolerances = t;

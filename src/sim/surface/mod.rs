@@ -1318,17 +1318,21 @@ pub const GUARD_ATTEMPTS: u32 = 8;
 /// method; a fixed step too long for the skin also stalls a fixed-step method, slowly, after a
 /// good start (explicit Euler gains energy in every lightly damped mode).
 pub fn stall_advice(kind: IntegratorKind) -> String {
-    let forces = "the character's forces are out of range: look for a huge stiffness, a tiny \
-                  mass, or a shape or tissue anchor far from the skin";
     match kind.fixed_step_field() {
         Some(field) => format!(
-            "{forces}; with {} (fixed step), also a step too long for the skin: try a smaller \
-             {field} in the character's [simulation] or an adaptive integrator",
+            "{STALL_FORCES_ADVICE}; with {} (fixed step), also a step too long for the skin: \
+             try a smaller {field} in the character's [simulation] or an adaptive integrator",
             kind.name()
         ),
-        None => forces.to_string(),
+        None => STALL_FORCES_ADVICE.to_string(),
     }
 }
+
+/// The part of [`stall_advice`] that holds for every method (front ends that name their own
+/// controls for the step use it alone).
+pub const STALL_FORCES_ADVICE: &str = "the character's forces are out of range: look for a huge \
+                                       stiffness, a tiny mass, or a shape or tissue anchor far \
+                                       from the skin";
 
 /// The constraint phase on the candidate in `w.x_new`/`w.v_new`: one full pass, then re-check
 /// passes over corrected neighbourhoods with refreshed normals until nothing moves (at most
