@@ -129,6 +129,33 @@ pub fn write_all(dir: &Path) -> Result<Vec<std::path::PathBuf>, CharacterFileErr
 /// there 2 ms is about Verlet's (0.3-1.7 of it; see docs/simulate.md, "Step control").
 const EXAMPLE_RK4_STEP_S: f32 = 0.002;
 
+/// Explicit Euler's step on the examples' 32×32 skins, seconds (finer skins scale it by the
+/// square of the spacing; 16×16 and coarser keep their body's step).
+///
+/// Euler's stability region, the disc `|1 + hλ| < 1`, holds a damped oscillation
+/// `λ = −γ ± iω` only while `h < 2γ/ω²`. From 16×16 to 32×32 the skin's membrane frequencies
+/// double while its damping rate stays ([`Materials`]), so a 16×16 skin's step is up to four
+/// times too long at 32×32. Where the tissue springs are slack a point has only the skin's own
+/// damping (2/s), and the 32×32 skins rang at 0.5 ms without ever diverging: at rest (neutral
+/// posture, 20 s settled, then 2 s sampled at 60 Hz) a point by the penguin's base swung through
+/// more than 15 mm at about 20 Hz, its largest move between frames 31 mm (torso 19, wombat 19;
+/// the arm 8 mm at its 0.25 ms). At 0.25 ms the penguin still moved 11 mm between frames and
+/// the torso 4.8; at 0.2 ms the arm 1.1 mm; at 0.15 ms no example moves more than a quarter of
+/// a millimetre between frames after 20 or 60 s, but for six neighbouring points below the
+/// wombat's top ring (up to 1.5 mm).
+const EXAMPLE_EULER_STEP_32_S: f32 = 0.000_15;
+
+/// The explicit Euler step of an example whose own (16×16) step is `coarse_step_s`, at an
+/// `around × along` skin ([`EXAMPLE_EULER_STEP_32_S`]).
+fn example_euler_step_s(coarse_step_s: f32, around: u32, along: u32) -> f32 {
+    let finest = around.max(along);
+    if finest <= 16 {
+        return coarse_step_s;
+    }
+    let spacing = 32.0 / finest as f32;
+    coarse_step_s.min(EXAMPLE_EULER_STEP_32_S * spacing * spacing)
+}
+
 /// The simulation settings every example starts from.
 fn example_simulation() -> SimulationDefaults {
     SimulationDefaults {
@@ -962,9 +989,11 @@ fn arm() -> Body {
             smooth_passes: 0,
         },
         // Explicit Euler grows every lightly damped mode whose `h ω²` exceeds its damping rate;
-        // the other examples' tissue damping absorbs that at 0.5 ms, the arm's light skin does
-        // not: at 0.5 ms it diverged after 4.7 s of its motion (5.3 s at rest), at 0.4 ms after
-        // 12.9 s; 0.35 ms ran 60 s and 0.3 ms 120 s (session 28).
+        // the other 16×16 examples' damping absorbs that at 0.5 ms, the arm's light skin does
+        // not: at 0.5 ms the 32×32 arm diverged after 4.7 s of its motion (5.3 s at rest), at
+        // 0.4 ms after 12.9 s; 0.35 ms ran 60 s and 0.3 ms 120 s without diverging (session
+        // 28), but its skin still rang at 0.25 ms: the 32×32 arm takes
+        // `EXAMPLE_EULER_STEP_32_S`, this is the 16×16 arm's step.
         simulation: SimulationDefaults {
             euler_step_s: 0.000_25,
             ..example_simulation()
@@ -1012,6 +1041,10 @@ fn finish(body: Body, around: u32, along: u32) -> Character {
         tube,
         simulation,
     } = body;
+    let simulation = SimulationDefaults {
+        euler_step_s: example_euler_step_s(simulation.euler_step_s, around, along),
+        ..simulation
+    };
     let posture = Posture::neutral(&skeleton);
     let pose = skeleton.forward_kinematics(&posture);
     let mut character = Character {
