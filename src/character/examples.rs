@@ -129,8 +129,8 @@ pub fn write_all(dir: &Path) -> Result<Vec<std::path::PathBuf>, CharacterFileErr
 /// there 2 ms is about Verlet's (0.3-1.7 of it; see docs/simulate.md, "Step control").
 const EXAMPLE_RK4_STEP_S: f32 = 0.002;
 
-/// Explicit Euler's step on the examples' 32×32 skins, seconds (finer skins scale it by the
-/// square of the spacing; 16×16 and coarser keep their body's step).
+/// Explicit Euler's step on the examples' 32×32 skins, seconds (other resolutions scale it by
+/// the square of the spacing, and no example steps longer than its body's own step).
 ///
 /// Euler's stability region, the disc `|1 + hλ| < 1`, holds a damped oscillation
 /// `λ = −γ ± iω` only while `h < 2γ/ω²`. From 16×16 to 32×32 the skin's membrane frequencies
@@ -145,15 +145,13 @@ const EXAMPLE_RK4_STEP_S: f32 = 0.002;
 /// wombat's top ring (up to 1.5 mm).
 const EXAMPLE_EULER_STEP_32_S: f32 = 0.000_15;
 
-/// The explicit Euler step of an example whose own (16×16) step is `coarse_step_s`, at an
-/// `around × along` skin ([`EXAMPLE_EULER_STEP_32_S`]).
-fn example_euler_step_s(coarse_step_s: f32, around: u32, along: u32) -> f32 {
-    let finest = around.max(along);
-    if finest <= 16 {
-        return coarse_step_s;
-    }
-    let spacing = 32.0 / finest as f32;
-    coarse_step_s.min(EXAMPLE_EULER_STEP_32_S * spacing * spacing)
+/// The explicit Euler step of an example whose body's own step (the 16×16 skin's) is
+/// `body_step_s`, at an `around × along` skin: [`EXAMPLE_EULER_STEP_32_S`] scaled by the square
+/// of the spacing, but never longer than the body's step (at 16×16 the scaled step, 0.6 ms, is
+/// longer than every body's, so the 16×16 files keep theirs).
+fn example_euler_step_s(body_step_s: f32, around: u32, along: u32) -> f32 {
+    let spacing = 32.0 / around.max(along) as f32;
+    body_step_s.min(EXAMPLE_EULER_STEP_32_S * spacing * spacing)
 }
 
 /// The simulation settings every example starts from.
