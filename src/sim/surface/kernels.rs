@@ -328,22 +328,6 @@ crate::sim::simd::multiversion! {
     }
 }
 
-/// `jac ← J_d · jac` at entry `i` for the rows of `J_d` (row-major).
-#[inline(always)]
-fn accumulate(jac: &mut [Vec<f32>; 9], i: usize, rows: [[f32; 3]; 3]) {
-    let old = [
-        [jac[0][i], jac[1][i], jac[2][i]],
-        [jac[3][i], jac[4][i], jac[5][i]],
-        [jac[6][i], jac[7][i], jac[8][i]],
-    ];
-    for r in 0..3 {
-        for c in 0..3 {
-            jac[3 * r + c][i] =
-                rows[r][0] * old[0][c] + rows[r][1] * old[1][c] + rows[r][2] * old[2][c];
-        }
-    }
-}
-
 /// One chunk of [`LANES`] entries of the nine Jacobian arrays, copied into locals.
 ///
 /// The Jacobian kernels work chunk by chunk on these copies. Indexed straight through the
@@ -354,25 +338,34 @@ fn accumulate(jac: &mut [Vec<f32>; 9], i: usize, rows: [[f32; 3]; 3]) {
 /// torso 2-4 % and the wombat about 3.5 % faster: docs/simulate.md.)
 type JacLanes = [[f32; LANES]; 9];
 
-/// Entries `[chunk · LANES, (chunk + 1) · LANES)` of `jac`.
+/// Entries `[start, start + len)` of `jac` (`len ≤ LANES`; a whole chunk when `len` is
+/// [`LANES`], which the compiler sees as a constant in the chunk loops), the rest zero.
 #[inline(always)]
-fn load_jac(jac: &[Vec<f32>; 9], chunk: usize) -> JacLanes {
+fn load_jac(jac: &[Vec<f32>; 9], start: usize, len: usize) -> JacLanes {
     let mut lanes = [[0.0; LANES]; 9];
     for (l, j) in lanes.iter_mut().zip(jac) {
-        l.copy_from_slice(&j[chunk * LANES..(chunk + 1) * LANES]);
+        l[..len].copy_from_slice(&j[start..start + len]);
     }
     lanes
 }
 
-/// Writes `lanes` back to the entries [`load_jac`] read.
+/// Writes the first `len` lanes back to the entries [`load_jac`] read.
 #[inline(always)]
-fn store_jac(jac: &mut [Vec<f32>; 9], chunk: usize, lanes: &JacLanes) {
+fn store_jac(jac: &mut [Vec<f32>; 9], start: usize, len: usize, lanes: &JacLanes) {
     for (j, l) in jac.iter_mut().zip(lanes) {
-        j[chunk * LANES..(chunk + 1) * LANES].copy_from_slice(l);
+        j[start..start + len].copy_from_slice(&l[..len]);
     }
 }
 
-/// [`accumulate`] on lane `l` of a chunk.
+/// Entries `[start, start + len)` of `s` (`len ≤ LANES`), the rest zero.
+#[inline(always)]
+fn load_lanes(s: &[f32], start: usize, len: usize) -> [f32; LANES] {
+    let mut lanes = [0.0; LANES];
+    lanes[..len].copy_from_slice(&s[start..start + len]);
+    lanes
+}
+
+/// `jac ← J_d · jac` on lane `l` of a chunk, for the rows of `J_d` (row-major).
 #[inline(always)]
 fn accumulate_lane(jac: &mut JacLanes, l: usize, rows: [[f32; 3]; 3]) {
     let old = [
@@ -468,8 +461,10 @@ impl PointDeformation for Bend {
 }
 
 /// `d` applied to every point, in place, with `jac ← J_d · jac` ([`PointDeformation`] names
-/// which coordinate array is which): whole chunks of [`LANES`] points on local copies of the
-/// Jacobian ([`JacLanes`]), the rest point by point with the same arithmetic.
+/// which coordinate array is which), chunk by chunk on local copies ([`JacLanes`]): whole
+/// chunks of [`LANES`] points, then the last, partial one through zero-padded lanes (every
+/// deformation takes the origin harmlessly; [`Batch::evaluate`] pads its batches to whole
+/// chunks anyway).
 #[inline(always)]
 fn deform_with_jacobian(
     d: &impl PointDeformation,
@@ -479,23 +474,46 @@ fn deform_with_jacobian(
     jac: &mut [Vec<f32>; 9],
 ) {
     let n = a.len().min(b.len()).min(c.len()).min(jac_len(jac));
-    let whole = n / LANES;
-    for k in 0..whole {
-        let at = k * LANES..(k + 1) * LANES;
+    let whole = n / LANES * LANES;
+    for start in (0..whole).step_by(LANES) {
+        let at = start..start + LANES;
         let (a, b, c) = (&mut a[at.clone()], &b[at.clone()], &mut c[at]);
-        let mut j = load_jac(jac, k);
+        let mut j = load_jac(jac, start, LANES);
         for l in 0..LANES {
-            let (na, nc, rows) = d.apply(a[l], b[l], c[l]);
-            (a[l], c[l]) = (na, nc);
-            accumulate_lane(&mut j, l, rows);
+            (a[l], c[l]) = deform_lane(d, a[l], b[l], c[l], &mut j, l);
         }
-        store_jac(jac, k, &j);
+        store_jac(jac, start, LANES, &j);
     }
-    for i in whole * LANES..n {
-        let (na, nc, rows) = d.apply(a[i], b[i], c[i]);
-        (a[i], c[i]) = (na, nc);
-        accumulate(jac, i, rows);
+    let len = n - whole;
+    if len > 0 {
+        let (mut ta, tb, mut tc) = (
+            load_lanes(a, whole, len),
+            load_lanes(b, whole, len),
+            load_lanes(c, whole, len),
+        );
+        let mut j = load_jac(jac, whole, len);
+        for l in 0..LANES {
+            (ta[l], tc[l]) = deform_lane(d, ta[l], tb[l], tc[l], &mut j, l);
+        }
+        a[whole..n].copy_from_slice(&ta[..len]);
+        c[whole..n].copy_from_slice(&tc[..len]);
+        store_jac(jac, whole, len, &j);
     }
+}
+
+/// `d` on one lane: the new `a` and `c`, with lane `l` of `jac` updated.
+#[inline(always)]
+fn deform_lane(
+    d: &impl PointDeformation,
+    a: f32,
+    b: f32,
+    c: f32,
+    jac: &mut JacLanes,
+    l: usize,
+) -> (f32, f32) {
+    let (na, nc, rows) = d.apply(a, b, c);
+    accumulate_lane(jac, l, rows);
+    (na, nc)
 }
 
 // The inverse deformations (deformed → rest) as `Resolved::invert`, in place, with (`taper`,
@@ -565,26 +583,43 @@ crate::sim::simd::multiversion! {
 crate::sim::simd::multiversion! {
     /// `∇_shape F = Jᵀ ∇_rest F`.
     fn gradient_to_shape(jac: &[Vec<f32>; 9], gx: &mut [f32], gy: &mut [f32], gz: &mut [f32]) {
+        // Chunk by chunk on local copies of the Jacobian, as `deform_with_jacobian`.
         let n = gx.len().min(gy.len()).min(gz.len()).min(jac_len(jac));
-        let whole = n / LANES;
-        for k in 0..whole {
-            let at = k * LANES..(k + 1) * LANES;
+        let whole = n / LANES * LANES;
+        for start in (0..whole).step_by(LANES) {
+            let at = start..start + LANES;
             let (xs, ys, zs) = (&mut gx[at.clone()], &mut gy[at.clone()], &mut gz[at]);
-            let j = load_jac(jac, k);
+            let j = load_jac(jac, start, LANES);
             for l in 0..LANES {
-                let g = [xs[l], ys[l], zs[l]];
-                xs[l] = dot3([j[0][l], j[3][l], j[6][l]], g);
-                ys[l] = dot3([j[1][l], j[4][l], j[7][l]], g);
-                zs[l] = dot3([j[2][l], j[5][l], j[8][l]], g);
+                (xs[l], ys[l], zs[l]) = transpose_times(&j, l, [xs[l], ys[l], zs[l]]);
             }
         }
-        for i in whole * LANES..n {
-            let g = [gx[i], gy[i], gz[i]];
-            gx[i] = dot3([jac[0][i], jac[3][i], jac[6][i]], g);
-            gy[i] = dot3([jac[1][i], jac[4][i], jac[7][i]], g);
-            gz[i] = dot3([jac[2][i], jac[5][i], jac[8][i]], g);
+        let len = n - whole;
+        if len > 0 {
+            let mut t = [
+                load_lanes(gx, whole, len),
+                load_lanes(gy, whole, len),
+                load_lanes(gz, whole, len),
+            ];
+            let j = load_jac(jac, whole, len);
+            for l in 0..LANES {
+                (t[0][l], t[1][l], t[2][l]) = transpose_times(&j, l, [t[0][l], t[1][l], t[2][l]]);
+            }
+            gx[whole..n].copy_from_slice(&t[0][..len]);
+            gy[whole..n].copy_from_slice(&t[1][..len]);
+            gz[whole..n].copy_from_slice(&t[2][..len]);
         }
     }
+}
+
+/// `Jᵀ g` for lane `l` of a chunk of Jacobians (row-major).
+#[inline(always)]
+fn transpose_times(j: &JacLanes, l: usize, g: [f32; 3]) -> (f32, f32, f32) {
+    (
+        dot3([j[0][l], j[3][l], j[6][l]], g),
+        dot3([j[1][l], j[4][l], j[7][l]], g),
+        dot3([j[2][l], j[5][l], j[8][l]], g),
+    )
 }
 
 /// `a · b` as `a₀b₀ + a₁b₁ + a₂b₂`, summed left to right.
@@ -951,9 +986,11 @@ mod tests {
         }
     }
 
-    /// The deformation kernels work in whole chunks of [`LANES`] entries and finish the rest
-    /// point by point; both paths, at every SIMD level, must give each entry the same bits
-    /// (the entries' positions and Jacobians after a chain, and the shape-frame gradient).
+    /// The deformation kernels work in whole chunks of [`LANES`] entries and take the rest as
+    /// one zero-padded partial chunk; both paths, at every SIMD level, must give each entry the
+    /// same bits (the entries' positions and Jacobians after a chain, and the shape-frame
+    /// gradient). That the arithmetic itself is right is
+    /// `batches_match_the_character_models_shapes`.
     #[test]
     fn chunked_and_remainder_paths_of_the_deformation_kernels_agree() {
         use crate::sim::simd::{SimdLevel, with_simd_level};
