@@ -329,6 +329,30 @@ fn simulate_motion_none_holds_the_neutral_posture() {
     assert!((v["sim_seconds"].as_f64().expect("number") - 0.1).abs() < 1e-6);
 }
 
+/// `--resolution` finer than the file shortens explicit Euler's step by the square of the
+/// spacing (`Character::with_resolution`), and the simulator takes it even below `min_step_s`:
+/// the 32×32 penguin at 64×64 on the file's 0.15 ms stalled 0.63 s into its motion.
+#[test]
+fn a_finer_resolution_steps_euler_short_enough_to_stay_finite() {
+    let v = simulate_json(&[
+        "penguin",
+        "--resolution",
+        "64x64",
+        "--seconds",
+        "0.7",
+        "--integrator",
+        "euler",
+    ]);
+    assert!(v["stalled_at_s"].is_null(), "{v}");
+    assert_eq!(v["nonfinite_events"], 0, "{v}");
+    assert_eq!(v["skin_points"], 64 * 64, "{v}");
+    let longest = v["step_secs"]["max"].as_f64().expect("a number");
+    assert!(
+        (longest - 0.000_15 / 4.0).abs() < 1e-7,
+        "a quarter of the file's 0.15 ms: {v}"
+    );
+}
+
 #[test]
 fn simulate_a_character_whose_forces_explode_reports_the_stall_and_fails() {
     let dir = tempfile::tempdir().expect("temp dir");

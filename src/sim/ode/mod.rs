@@ -207,6 +207,18 @@ impl Tolerances {
         }
     }
 
+    /// The shortest step the simulator takes or retries with `kind`: [`Tolerances::min_step_s`],
+    /// or a fixed-step method's own step where that is shorter, seconds. A fixed step below
+    /// `min_step_s` (a skin resampled finer, a file, the panel's slider) is taken as it is, not
+    /// lengthened to the floor.
+    pub fn step_floor_s(&self, kind: IntegratorKind) -> f64 {
+        if kind.is_adaptive() {
+            self.min_step_s
+        } else {
+            self.min_step_s.min(self.fixed_step_s(kind))
+        }
+    }
+
     /// Whether `step_s` is the smallest step (within rounding), where an adaptive method accepts
     /// any finite error (counted as forced).
     pub fn at_min_step(&self, step_s: f64) -> bool {

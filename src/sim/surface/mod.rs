@@ -1054,7 +1054,7 @@ impl DeformationModel for SurfaceModel {
             self.restore_checkpoint();
         }
         self.ensure_start(poses);
-        let min_step = self.core.tolerances.min_step_s;
+        let min_step = self.core.tolerances.step_floor_s(self.core.kind);
         let mut consecutive_failures = 0u32;
         // The planned step before the current run of failures (restored if the guard gives up).
         let mut step_before_failures = self.core.step_s;

@@ -319,6 +319,28 @@ fn a_stall_keeps_the_steps_accepted_before_it() {
     assert_eq!((m.core.x.clone(), m.core.v.clone()), kept);
 }
 
+/// A fixed step shorter than `min_step_s` (as a skin resampled finer gets) is taken as it is:
+/// the floor of the adaptive methods once lengthened it to `min_step_s`, and the 32×32 penguin
+/// at 64×64 stalled on Euler steps twice the length its skin was given.
+#[test]
+fn a_fixed_step_below_the_minimum_step_is_taken_as_it_is() {
+    let (mut m, motion) = model_and_motion("penguin", 16);
+    let mut poses = MotionPoses(&motion);
+    m.apply(&ParameterChange::Integrator(IntegratorKind::Euler))
+        .expect("accepted");
+    let mut t = m.tolerances();
+    t.euler_step_s = 0.25 * t.min_step_s;
+    m.apply(&ParameterChange::Tolerances(t)).expect("accepted");
+    let h = t.euler_step_s;
+    let r = m.advance(100.0 * h, &mut poses, &mut Unlimited, None);
+    assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{r:?}");
+    assert_eq!((r.steps, r.rejected_steps), (100, 0), "{r:?}");
+    assert!(
+        (r.min_step_s - h).abs() < 1e-12 && (r.max_step_s - h).abs() < 1e-12,
+        "every step is the fixed {h} s: {r:?}"
+    );
+}
+
 #[test]
 fn guard_restores_the_last_good_state_after_an_injected_nan() {
     let (mut m, motion) = model_and_motion("penguin", 16);
