@@ -9,6 +9,8 @@
 //! anew ([`super::tissue::anchors_for_points`]) with interpolated spring parameters, and get a
 //! spring only where the interpolated "has a spring" weight is at least one half.
 //!
+//! A new point whose fat point ends up inside a muscle (it lies on a chord of the old skin) is
+//! pushed out at the neutral posture (`push_fat_points_out`) before the springs are attached.
 //! The simulation settings carry over but for explicit Euler's fixed step, which a finer skin
 //! needs shorter by the square of its spacing (`resampled_simulation`).
 
@@ -16,7 +18,7 @@ use glam::Vec3;
 
 use super::skin::{Skin, Sym2};
 use super::tissue::{TissueSpring, anchors_for_points};
-use super::{Character, Posture, SimulationDefaults, ValidationError};
+use super::{Character, Posture, ShapeInstance, SimulationDefaults, ValidationError};
 
 /// Where a new grid coordinate falls on the old grid: lower index, upper index, weight of upper.
 #[derive(Debug, Clone, Copy)]
@@ -147,6 +149,62 @@ fn resampled_simulation(
     }
 }
 
+/// At most this many passes of [`push_fat_points_out`].
+const PUSH_OUT_PASSES: usize = 20;
+
+/// How far past a muscle's surface [`push_fat_points_out`] leaves a fat point, metres: the
+/// projection's own tolerance is 10 µm either side, and the normals turn a little as the
+/// neighbours move.
+const PUSH_OUT_MARGIN_M: f32 = 5e-5;
+
+/// Moves every new free point of `skin` (`new_point`, one flag per grid point) whose fat point
+/// `r − τ n̂` lies inside a muscle (`instances`, the neutral posture) so that the fat point sits
+/// on the muscle's surface, pass after pass with fresh normals until none is inside (at most
+/// [`PUSH_OUT_PASSES`]); `normals` (the skin's outward normals on entry) are left those of the
+/// final positions.
+///
+/// A new point lies on a chord of the old skin, and a chord cuts into a muscle where the skin
+/// bends sharply between two old rows: the 32×32 wombat's last free row resampled to 64×64
+/// (half way to the small ring at its snout) lay 28-37 mm inside its head, the penguin's 14 mm.
+/// The simulation would make the same moves in its first constraint phase, but as corrections
+/// of that size: rejected first steps, a skin that jumps in the first frame, and a report whose
+/// largest correction is the start-up's (the wombat's 40 mm at 64×64, 65 mm at 128×128).
+fn push_fat_points_out(
+    skin: &mut Skin,
+    new_point: &[bool],
+    instances: &[ShapeInstance],
+    normals: &mut Vec<Vec3>,
+) {
+    for _ in 0..PUSH_OUT_PASSES {
+        let mut moved = false;
+        for j in 1..skin.along - 1 {
+            for i in 0..skin.around {
+                let k = skin.index(i, j);
+                if !new_point[k] {
+                    continue;
+                }
+                let fat_point = skin.positions_m[k] - normals[k] * skin.fat_m[k];
+                let inside = instances
+                    .iter()
+                    .find(|s| s.may_contain_world(fat_point) && s.value_world(fat_point) < 0.0);
+                if let Some(s) = inside {
+                    let surface = s
+                        .world_from_shape
+                        .transform_point3(s.geometry.project(s.to_shape(fat_point)));
+                    let push = surface - fat_point;
+                    let margin = push.normalize_or_zero() * PUSH_OUT_MARGIN_M;
+                    skin.positions_m[k] += push + margin;
+                    moved = true;
+                }
+            }
+        }
+        skin.outward_normals(&skin.positions_m, normals);
+        if !moved {
+            break;
+        }
+    }
+}
+
 impl Character {
     /// This character with its skin resampled to `around × along` points (see the module
     /// docs). The skeleton, shapes and motions are unchanged, and so are the simulation
@@ -247,6 +305,15 @@ impl Character {
         resampled
             .skin
             .outward_normals(&resampled.skin.positions_m, &mut normals);
+        // Points that coincide with old ones keep their positions (the file's were outside).
+        let new_point: Vec<bool> = lj
+            .iter()
+            .flat_map(|b| {
+                li.iter()
+                    .map(move |a| a.exact.is_none() || b.exact.is_none())
+            })
+            .collect();
+        push_fat_points_out(&mut resampled.skin, &new_point, &instances, &mut normals);
         // The points that need a new anchor (not coinciding with an old point, and with a
         // spring nearby to interpolate from), searched all at once.
         let mut search = Vec::new();
@@ -353,10 +420,20 @@ mod tests {
         // Total mass is preserved; midpoints are interpolated.
         let total = |c: &Character| c.skin.mass_kg.iter().sum::<f32>();
         assert!((total(&r) - total(&c)).abs() < 1e-4);
-        let mid = r.skin.positions_m[r.skin.index(1, 2)];
-        let expect =
-            0.5 * (c.skin.positions_m[c.skin.index(0, 1)] + c.skin.positions_m[c.skin.index(1, 1)]);
-        assert!((mid - expect).length() < 1e-6);
+        // Midpoints are interpolated, then moved out where their fat point fell inside a
+        // muscle (`push_fat_points_out`; the 16×16 skin's chords cut into the muscles by up to
+        // about 7 mm): each within a centimetre of the interpolation, some exactly on it.
+        let off: Vec<f32> = (0..16)
+            .map(|j| {
+                let mid = r.skin.positions_m[r.skin.index(1, 2 * j)];
+                let expect = 0.5
+                    * (c.skin.positions_m[c.skin.index(0, j)]
+                        + c.skin.positions_m[c.skin.index(1, j)]);
+                (mid - expect).length()
+            })
+            .collect();
+        assert!(off.iter().all(|&d| d < 0.01), "{off:?}");
+        assert!(off.iter().filter(|&&d| d < 1e-6).count() >= 4, "{off:?}");
         assert_eq!(
             r.tissue.len(),
             r.skin.point_count(),
@@ -399,6 +476,56 @@ mod tests {
         let r = old_file.with_resolution(64, 64).expect("64x64");
         assert_eq!(r.simulation.rk4_step_or_euler_s(), d.euler_step_s);
         assert!(r.simulation.euler_step_s < d.euler_step_s);
+    }
+
+    /// The deepest fat point of `c`'s skin inside any muscle at the neutral posture, with the
+    /// model's own normals, metres.
+    fn neutral_fat_depth_m(c: &Character) -> f32 {
+        let posture = Posture::neutral(&c.skeleton);
+        let pose = c.skeleton.forward_kinematics(&posture);
+        let mut instances = Vec::new();
+        c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
+        let mut normals = Vec::new();
+        c.skin.outward_normals(&c.skin.positions_m, &mut normals);
+        let mut worst = 0.0f32;
+        for j in 1..c.skin.along - 1 {
+            for i in 0..c.skin.around {
+                let k = c.skin.index(i, j);
+                let q = c.skin.positions_m[k] - normals[k] * c.skin.fat_m[k];
+                for s in instances.iter().filter(|s| s.value_world(q) < 0.0) {
+                    let local = s.to_shape(q);
+                    worst = worst.max((s.geometry.project(local) - local).length());
+                }
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn resampled_skins_start_with_their_fat_outside_the_muscles() {
+        for name in ["wombat", "penguin", "torso", "arm"] {
+            let c = build(name, 32, 32).expect("known example");
+            assert!(
+                neutral_fat_depth_m(&c) < 1e-4,
+                "{name}: the file starts outside"
+            );
+            for (around, along) in [(64, 64), (48, 40), (128, 128)] {
+                let r = c.with_resolution(around, along).expect("resampled");
+                let model = neutral_fat_depth_m(&r);
+                assert!(model < 1e-4, "{name} {around}x{along}: {model} m deep");
+                // The simulator offsets fat points along normals from differences over as
+                // many nodes as one 32×32 spacing, which lie a little inside these.
+                let sim =
+                    crate::sim::surface::SurfaceModel::new(r, crate::sim::IntegratorKind::Verlet)
+                        .expect("simulates");
+                let depth = sim.max_depth_m();
+                assert!(
+                    depth < 2e-3,
+                    "{name} {around}x{along}: {depth} m deep for the simulator"
+                );
+                eprintln!("{name} {around}x{along}: model {model} m, simulator {depth} m");
+            }
+        }
     }
 
     #[test]
