@@ -320,8 +320,8 @@ fn a_stall_keeps_the_steps_accepted_before_it() {
 }
 
 /// A fixed step shorter than `min_step_s` (as a skin resampled finer gets) is taken as it is:
-/// the floor of the adaptive methods once lengthened it to `min_step_s`, and the 32×32 penguin
-/// at 64×64 stalled on Euler steps twice the length its skin was given.
+/// the floor of the adaptive methods once lengthened it to `min_step_s`, so the 32×32 examples
+/// at 64×64 stepped Euler at 0.1 ms where their skins were given 37.5 µs.
 #[test]
 fn a_fixed_step_below_the_minimum_step_is_taken_as_it_is() {
     let (mut m, motion) = model_and_motion("penguin", 16);
