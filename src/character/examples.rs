@@ -12,6 +12,7 @@ use std::path::Path;
 
 use glam::{Quat, Vec3};
 
+use super::resample::euler_step_scale;
 use super::shape::{Deformation, Param, Primitive, Shape, ShapeInstance};
 use super::skeleton::{Dof, DofRef, Joint, JointId, Posture, Skeleton};
 use super::skin::Skin;
@@ -150,8 +151,7 @@ const EXAMPLE_EULER_STEP_32_S: f32 = 0.000_15;
 /// of the spacing, but never longer than the body's step (at 16×16 the scaled step, 0.6 ms, is
 /// longer than every body's, so the 16×16 files keep theirs).
 fn example_euler_step_s(body_step_s: f32, around: u32, along: u32) -> f32 {
-    let spacing = 32.0 / around.max(along) as f32;
-    body_step_s.min(EXAMPLE_EULER_STEP_32_S * spacing * spacing)
+    body_step_s.min(EXAMPLE_EULER_STEP_32_S * euler_step_scale((32, 32), (around, along)))
 }
 
 /// The simulation settings every example starts from.

@@ -125,27 +125,33 @@ pub fn resample_field(
     grid(values, around, &li, &lj)
 }
 
-/// The simulation settings for a skin resampled from `old` to `new` points (around × along):
-/// `defaults` with explicit Euler's fixed step shortened by the square of the finer spacing.
+/// By how much explicit Euler's stable step changes from a skin of `from` points (around ×
+/// along) to one of `to` on the same body: the square of the spacing ratio, in the direction
+/// refined most (above 1 for a coarser skin).
 ///
 /// Euler's stability region holds a damped oscillation `λ = −γ ± iω` only while `h < 2γ/ω²`.
-/// The resampling keeps the damping rate `γ` (mass and damping scale together) while the
-/// membrane's frequencies `ω` grow as the spacing shrinks, so a step that was stable on the
-/// file's skin can blow up on a finer one (the 32×32 penguin at 64×64 stalled 0.63 s into its
-/// motion at the file's 0.15 ms). The step follows the direction refined most, and never grows:
-/// a coarser skin keeps the file's step. RK4, which needs no damping to be stable, keeps its
-/// step (a file without its own RK4 step gets the file's Euler step written out, so RK4 does
-/// not shrink with Euler's); the adaptive integrators find their own.
+/// The skin's damping rate `γ` stays (mass and damping scale together) while the membrane's
+/// frequencies `ω` grow as the spacing shrinks. The example generator and the resampling both
+/// scale their steps by this.
+pub(super) fn euler_step_scale((m0, n0): (u32, u32), (around, along): (u32, u32)) -> f32 {
+    let ratio = (m0 as f32 / around as f32).min(n0 as f32 / along as f32);
+    ratio * ratio
+}
+
+/// The simulation settings for a skin resampled from `old` to `new` points (around × along):
+/// `defaults` with explicit Euler's fixed step shortened by [`euler_step_scale`], never
+/// lengthened (a coarser skin keeps the file's step). A step that was stable on the file's skin
+/// can blow up on a finer one: the 32×32 penguin at 64×64 stalled 0.63 s into its motion at the
+/// file's 0.15 ms. RK4, which needs no damping to be stable, keeps its step (a file without its
+/// own RK4 step gets the file's Euler step written out, so RK4 does not shrink with Euler's);
+/// the adaptive integrators find their own.
 fn resampled_simulation(
     defaults: &SimulationDefaults,
-    (m0, n0): (u32, u32),
-    (around, along): (u32, u32),
+    old: (u32, u32),
+    new: (u32, u32),
 ) -> SimulationDefaults {
-    let ratio = (m0 as f32 / around as f32)
-        .min(n0 as f32 / along as f32)
-        .min(1.0);
     SimulationDefaults {
-        euler_step_s: defaults.euler_step_s * ratio * ratio,
+        euler_step_s: defaults.euler_step_s * euler_step_scale(old, new).min(1.0),
         rk4_step_s: Some(defaults.rk4_step_or_euler_s()),
         ..*defaults
     }
@@ -350,7 +356,8 @@ impl Character {
         resampled
             .skin
             .outward_normals(&resampled.skin.positions_m, &mut normals);
-        // Points that coincide with old ones keep their positions (the file's were outside).
+        // Per grid point (row by row, as `Skin::index`): not one that coincides with an old
+        // point. Those keep their positions (the file's were outside) and their springs.
         let new_point: Vec<bool> = lj
             .iter()
             .flat_map(|b| {
@@ -362,17 +369,13 @@ impl Character {
         resampled.skin.rest_metric = resampled_rest_metric(old, &resampled.skin, &li, &lj);
         // The points that need a new anchor (not coinciding with an old point, and with a
         // spring nearby to interpolate from), searched all at once.
-        let mut search = Vec::new();
-        let mut searched = Vec::new();
-        for (jn, b) in lj.iter().enumerate() {
-            for (im, a) in li.iter().enumerate() {
-                let k = resampled.skin.index(im as u32, jn as u32);
-                if (a.exact.is_none() || b.exact.is_none()) && has[k] >= 0.5 {
-                    search.push((resampled.skin.positions_m[k], normals[k]));
-                    searched.push(k);
-                }
-            }
-        }
+        let searched: Vec<usize> = (0..new_point.len())
+            .filter(|&k| new_point[k] && has[k] >= 0.5)
+            .collect();
+        let search: Vec<(Vec3, Vec3)> = searched
+            .iter()
+            .map(|&k| (resampled.skin.positions_m[k], normals[k]))
+            .collect();
         let mut new_anchor = vec![None; resampled.skin.point_count()];
         for (k, found) in searched
             .into_iter()
