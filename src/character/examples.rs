@@ -1145,7 +1145,7 @@ fn finish(body: Body, around: u32, along: u32) -> Character {
     };
     let mut normals = Vec::new();
     for _ in 0..20 {
-        skin_probe.outward_normals(&positions, &mut normals);
+        skin_probe.fat_normals(&positions, &mut normals);
         let mut moved = false;
         for k in 0..n_points {
             let j = k as u32 / around;

@@ -249,7 +249,7 @@ fn push_fat_points_out(
                 }
             }
         }
-        skin.outward_normals(&skin.positions_m, normals);
+        skin.fat_normals(&skin.positions_m, normals);
         if !moved {
             break;
         }
@@ -355,7 +355,7 @@ impl Character {
         let mut normals = Vec::new();
         resampled
             .skin
-            .outward_normals(&resampled.skin.positions_m, &mut normals);
+            .fat_normals(&resampled.skin.positions_m, &mut normals);
         // Per grid point (row by row, as `Skin::index`): not one that coincides with an old
         // point. Those keep their positions (the file's were outside) and their springs.
         let new_point: Vec<bool> = lj
@@ -548,7 +548,7 @@ mod tests {
         let mut instances = Vec::new();
         c.shape_instances_into(&posture, &pose, 0.0, &mut instances);
         let mut normals = Vec::new();
-        c.skin.outward_normals(&c.skin.positions_m, &mut normals);
+        c.skin.fat_normals(&c.skin.positions_m, &mut normals);
         let mut worst = 0.0f32;
         for j in 1..c.skin.along - 1 {
             for i in 0..c.skin.around {
@@ -575,14 +575,13 @@ mod tests {
                 let r = c.with_resolution(around, along).expect("resampled");
                 let model = neutral_fat_depth_m(&r);
                 assert!(model < 1e-4, "{name} {around}x{along}: {model} m deep");
-                // The simulator offsets fat points along normals from differences over as
-                // many nodes as one 32×32 spacing, which lie a little inside these.
+                // The simulator offsets its fat points along the same normals.
                 let sim =
                     crate::sim::surface::SurfaceModel::new(r, crate::sim::IntegratorKind::Verlet)
                         .expect("simulates");
                 let depth = sim.max_depth_m();
                 assert!(
-                    depth < 2e-3,
+                    depth < 1e-4,
                     "{name} {around}x{along}: {depth} m deep for the simulator"
                 );
                 eprintln!("{name} {around}x{along}: model {model} m, simulator {depth} m");

@@ -1570,14 +1570,11 @@ crate::sim::simd::multiversion! {
     }
 }
 
-/// Node strides (around, along) of the normals that offset the fat points (eq. 6): differences
-/// over about the material spacing of a 32×32 skin's neighbours, so a finer skin's fat offset
-/// does not follow every wrinkle. With one-node differences a 128×128 torso's fat points
-/// jumped by millimetres as wrinkles turned the normals (557 constraint rejections and 209
-/// forced steps in 1 s of its motion; with these strides 1 and 1). Skins of 32 points or
-/// fewer each way use one-node differences, as the forces and the renderer do.
+/// Node strides (around, along) of the normals that offset the fat points (eq. 6): the
+/// character model's rule ([`crate::character::skin::fat_normal_stride`]), so the simulator's
+/// fat points are the model's ([`crate::character::Skin::fat_normals`]).
 fn fat_stride(core: &Core) -> (usize, usize) {
-    ((core.around / 32).max(1), (core.along / 32).max(1))
+    crate::character::skin::fat_normal_stride(core.around, core.along)
 }
 
 /// The normals that offset the fat points of `grid` (the full grid of `core`'s skin).
