@@ -647,6 +647,25 @@ fn a_resampled_skin_rests_like_one_built_at_its_resolution() {
     );
 }
 
+/// Skins between multiples of 32 points offset their fat along normals that span at least a
+/// 32×32 skin's spacing ([`crate::character::skin::fat_normal_stride`]). With one-node
+/// normals there (the stride rounded down), the 40×40 wombat built at its resolution had 124
+/// constraint rejections and 12 forced steps in this test (the 48×48 one about as many).
+#[test]
+fn skins_between_multiples_of_32_rest_without_constraint_rejections() {
+    for size in [40, 48] {
+        let c = examples::build("wombat", size, size).expect("wombat");
+        let mut m = SurfaceModel::new(c, IntegratorKind::Verlet).expect("simulates");
+        let mut poses = FixedPosture(Posture::neutral(&m.character().skeleton));
+        let r = m.advance(2.0, &mut poses, &mut Unlimited, None);
+        assert_eq!(r.end, AdvanceEnd::ReachedTarget, "{size}: {r:?}");
+        assert!(
+            r.constraint_rejections <= 2 && r.forced_steps == 0,
+            "{size}x{size}: the skin fights its muscles at rest: {r:?}"
+        );
+    }
+}
+
 #[test]
 fn phase_times_come_from_the_clock_passed_in() {
     let (mut m, motion) = model_and_motion("penguin", 16);
