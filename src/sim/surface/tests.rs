@@ -647,6 +647,34 @@ fn a_resampled_skin_rests_like_one_built_at_its_resolution() {
     );
 }
 
+/// The simulator's fat normals (vectorised, structure of arrays) are the character model's
+/// [`crate::character::Skin::fat_normals`], which the resampling and the example generator
+/// push fat points out with: one definition, two implementations.
+#[test]
+fn the_simulators_fat_normals_are_the_models() {
+    for (name, around, along) in [("wombat", 48, 40), ("torso", 128, 128), ("arm", 32, 32)] {
+        let c = examples::build(name, 32, 32)
+            .expect("example")
+            .with_resolution(around, along)
+            .expect("resampled");
+        let m = SurfaceModel::new(c.clone(), IntegratorKind::Verlet).expect("simulates");
+        let grid: [Vec<f32>; 3] =
+            [0, 1, 2].map(|a| c.skin.positions_m.iter().map(|p| p[a]).collect());
+        let mut sim: [Vec<f32>; 3] = Default::default();
+        fat_normals(&m.core, &grid, &mut sim);
+        let mut model = Vec::new();
+        c.skin.fat_normals(&c.skin.positions_m, &mut model);
+        assert_eq!(model.len(), sim[0].len(), "{name}");
+        for (k, n) in model.iter().enumerate() {
+            let s = Vec3::new(sim[0][k], sim[1][k], sim[2][k]);
+            assert!(
+                (s - *n).length() < 1e-5,
+                "{name} {around}x{along} node {k}: simulator {s}, model {n}"
+            );
+        }
+    }
+}
+
 /// Skins between multiples of 32 points offset their fat along normals that span at least a
 /// 32×32 skin's spacing ([`crate::character::skin::fat_normal_stride`]). With one-node
 /// normals there (the stride rounded down), the 40×40 wombat built at its resolution had 124
