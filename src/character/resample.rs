@@ -211,8 +211,7 @@ const PUSH_OUT_MARGIN_M: f32 = 5e-5;
 /// Moves every new free point of `skin` (`new_point`, one flag per grid point) whose fat point
 /// `r − τ n̂` lies inside a muscle (`instances`, the neutral posture) so that the fat point sits
 /// on the muscle's surface, pass after pass with fresh normals until none is inside (at most
-/// [`PUSH_OUT_PASSES`]); `normals` (the skin's outward normals on entry) are left those of the
-/// final positions.
+/// [`PUSH_OUT_PASSES`]). Returns the [`Skin::fat_normals`] of the final positions.
 ///
 /// A new point lies on a chord of the old skin, and a chord cuts into a muscle where the skin
 /// bends sharply between two old rows: the 32×32 wombat's last free row resampled to 64×64
@@ -224,8 +223,9 @@ fn push_fat_points_out(
     skin: &mut Skin,
     new_point: &[bool],
     instances: &[ShapeInstance],
-    normals: &mut Vec<Vec3>,
-) {
+) -> Vec<Vec3> {
+    let mut normals = Vec::new();
+    skin.fat_normals(&skin.positions_m, &mut normals);
     for _ in 0..PUSH_OUT_PASSES {
         let mut moved = false;
         for j in 1..skin.along - 1 {
@@ -249,11 +249,12 @@ fn push_fat_points_out(
                 }
             }
         }
-        skin.fat_normals(&skin.positions_m, normals);
+        skin.fat_normals(&skin.positions_m, &mut normals);
         if !moved {
             break;
         }
     }
+    normals
 }
 
 impl Character {
@@ -352,10 +353,6 @@ impl Character {
             0.0,
             &mut instances,
         );
-        let mut normals = Vec::new();
-        resampled
-            .skin
-            .fat_normals(&resampled.skin.positions_m, &mut normals);
         // Per grid point (row by row, as `Skin::index`): not one that coincides with an old
         // point. Those keep their positions (the file's were outside) and their springs.
         let new_point: Vec<bool> = lj
@@ -365,7 +362,7 @@ impl Character {
                     .map(move |a| a.exact.is_none() || b.exact.is_none())
             })
             .collect();
-        push_fat_points_out(&mut resampled.skin, &new_point, &instances, &mut normals);
+        let normals = push_fat_points_out(&mut resampled.skin, &new_point, &instances);
         resampled.skin.rest_metric = resampled_rest_metric(old, &resampled.skin, &li, &lj);
         // The points that need a new anchor (not coinciding with an old point, and with a
         // spring nearby to interpolate from), searched all at once.
