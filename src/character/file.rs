@@ -525,9 +525,14 @@ mod tests {
     #[test]
     fn wrong_per_point_length_is_named() {
         let text = arm_text();
-        // Drop the last line of the fat array by giving a short explicit list instead.
+        // Replace the fat (one value or a per-point array) by a short explicit list.
         let start = text.find("fat_m = ").expect("fat");
-        let end = start + text[start..].find('\n').expect("eol");
+        let value_end = if text[start..].starts_with("fat_m = [") {
+            start + text[start..].find(']').expect("array end")
+        } else {
+            start
+        };
+        let end = value_end + text[value_end..].find('\n').expect("eol");
         let text = format!("{}fat_m = [0.01, 0.02]{}", &text[..start], &text[end..]);
         let m = load_error(&text);
         assert!(m.contains("skin: fat_m has 2 values, expected 48"), "{m}");
