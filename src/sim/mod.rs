@@ -177,7 +177,9 @@ pub struct AdvanceReport {
     /// Extra velocity-only force evaluations (Verlet's fixed-point iterations).
     pub velocity_evals: u64,
     /// Largest constraint correction applied on an accepted step, metres (how deep a point of
-    /// the fat layer had got inside a muscle before it was pushed out).
+    /// the fat layer had got inside a muscle before it was pushed out). It can exceed ε_c: the
+    /// rejection test limits each position component of a correction (paper 4.2.3), and a
+    /// forced step is accepted whatever its correction.
     pub max_penetration_m: f32,
     /// Skin points the constraint phase pushed out of a muscle, summed over the accepted steps
     /// (a point counts once per step however many passes moved it). Divided by `steps`, the
