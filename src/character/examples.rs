@@ -934,8 +934,9 @@ fn torso() -> Body {
 /// along the arm and to half about 66° either side of the crease around it), as the skin inside
 /// a real elbow carries little fat.
 ///
-/// With 15 mm everywhere the fat points of the crease's two sides crossed when the elbow bent
-/// and the re-check passes pushed the skin back and forth between the bones: on a 64×64 skin,
+/// With 15 mm everywhere, the skin squeezed into the crease as the elbow bent had its fat
+/// points 15 mm in along normals that every push turned, and the re-check passes pushed it
+/// back and forth between the bones (`docs/simulate.md`, "Fat on fine skins"): on a 64×64 skin,
 /// 3 s of the `bend` motion took 1262 steps with 337 constraint rejections and 56 forced steps;
 /// with the crease thinned, 553, 27 and 8 (thinning the outside of the elbow instead: 1310,
 /// 382 and 90). The 32×32 arm went from 462 steps to 314.

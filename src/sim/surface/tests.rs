@@ -696,8 +696,8 @@ fn skins_between_multiples_of_32_rest_without_constraint_rejections() {
 
 #[test]
 fn a_fine_arm_bends_its_elbow_without_fighting_its_muscles() {
-    // With 15 mm of fat in the elbow's crease the two sides' fat points crossed as the elbow
-    // bent, and the re-check passes pushed the skin back and forth between the bones: 337
+    // With 15 mm of fat in the elbow's crease, the skin squeezed there as the elbow bent was
+    // pushed back and forth between the bones by the re-check passes: 337
     // constraint rejections and 56 forced steps in these 3 s (checked with the old fat).
     // The example's crease carries 5 mm (`arm_fat_m` in the examples): 27 and 8.
     let (mut m, motion) = model_and_motion("arm", 64);
