@@ -37,6 +37,7 @@ fn simulate_prints_the_documented_json() {
         "steps",
         "rejected_steps",
         "max_penetration_m",
+        "epsilon_c_m",
         "nonfinite_events",
         "skin_points",
         "pushed_points_per_step",
@@ -58,6 +59,8 @@ fn simulate_prints_the_documented_json() {
     );
     assert!((v["sim_seconds"].as_f64().expect("number") - 0.3).abs() < 1e-6);
     assert_eq!(v["skin_points"], 256);
+    // The arm's ε_c, from its file, to read `max_penetration_m` against.
+    assert!((v["epsilon_c_m"].as_f64().expect("number") - 0.005).abs() < 1e-9);
     assert!(v["steps"].as_u64().expect("number") > 10);
     assert_eq!(v["nonfinite_events"], 0);
     let min = v["step_secs"]["min"].as_f64().expect("number");

@@ -117,6 +117,9 @@ struct Report {
     velocity_evals: u64,
     phase_fraction: PhaseFraction,
     max_penetration_m: f32,
+    /// ε_c, metres: the largest correction of a position component before a step is rejected
+    /// (what `max_penetration_m` is read against).
+    epsilon_c_m: f32,
     final_max_depth_m: f32,
     /// The deepest fat point after each 1/30 s slice (brute force, not timed), with
     /// `--sample-depth`.
@@ -344,6 +347,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             other,
         },
         max_penetration_m: total.max_penetration_m,
+        epsilon_c_m: model.epsilon_c_m(),
         final_max_depth_m: model.max_depth_m(),
         sampled_depth_m: args.sample_depth.then(|| depth_summary(&run.depths_m)),
         pushed_points_per_step: total.pushed_per_step().unwrap_or(0.0),
@@ -647,10 +651,11 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
     )?;
     writeln!(
         out,
-        "{:<28}{:.2} mm (final state {:.3} mm)",
+        "{:<28}{:.2} mm (final state {:.3} mm; ε_c {:.2} mm per coordinate)",
         "Max penetration",
         r.max_penetration_m * 1000.0,
-        r.final_max_depth_m * 1000.0
+        r.final_max_depth_m * 1000.0,
+        r.epsilon_c_m * 1000.0
     )?;
     if let Some(d) = &r.sampled_depth_m {
         writeln!(
