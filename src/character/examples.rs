@@ -1024,9 +1024,7 @@ fn arm() -> Body {
 // Skin wrapping, materials and attachment.
 
 fn inside_any(instances: &[ShapeInstance], p: Vec3) -> bool {
-    instances
-        .iter()
-        .any(|s| s.may_contain_world(p) && s.value_world(p) < 0.0)
+    instances.iter().any(|s| s.contains_world(p))
 }
 
 /// Distance from `origin` along `dir` to the outermost muscle surface within `t_max`, if any.

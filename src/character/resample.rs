@@ -18,7 +18,7 @@
 
 use glam::Vec3;
 
-use super::skin::{Skin, Sym2};
+use super::skin::{Skin, Sym2, is_positive_definite};
 use super::tissue::{TissueSpring, anchors_for_points};
 use super::{Character, Posture, ShapeInstance, SimulationDefaults, ValidationError};
 
@@ -190,8 +190,7 @@ fn resampled_rest_metric(old: &Skin, new: &Skin, li: &[Lerp], lj: &[Lerp]) -> Ve
                 actual[1] + strain[1],
                 actual[2] + strain[2],
             ];
-            let positive = g[0] > 0.0 && g[2] > 0.0 && g[0] * g[2] - g[1] * g[1] > 0.0;
-            if positive && g.iter().all(|x| x.is_finite()) {
+            if is_positive_definite(&g) && g.iter().all(|x| x.is_finite()) {
                 g
             } else {
                 *interpolated
@@ -235,14 +234,9 @@ fn push_fat_points_out(
                     continue;
                 }
                 let fat_point = skin.positions_m[k] - normals[k] * skin.fat_m[k];
-                let inside = instances
-                    .iter()
-                    .find(|s| s.may_contain_world(fat_point) && s.value_world(fat_point) < 0.0);
+                let inside = instances.iter().find(|s| s.contains_world(fat_point));
                 if let Some(s) = inside {
-                    let surface = s
-                        .world_from_shape
-                        .transform_point3(s.geometry.project(s.to_shape(fat_point)));
-                    let push = surface - fat_point;
+                    let push = s.project_world(fat_point) - fat_point;
                     let margin = push.normalize_or_zero() * PUSH_OUT_MARGIN_M;
                     skin.positions_m[k] += push + margin;
                     moved = true;

@@ -918,6 +918,13 @@ impl ShapeInstance {
             <= self.bound_radius_m * self.bound_radius_m
     }
 
+    /// True when the world point is strictly inside the shape (`F < 0`), the bounding sphere
+    /// tested first.
+    #[inline]
+    pub fn contains_world(&self, p_world: Vec3) -> bool {
+        self.may_contain_world(p_world) && self.value_world(p_world) < 0.0
+    }
+
     /// `F` of a world point.
     #[inline]
     pub fn value_world(&self, p_world: Vec3) -> f32 {

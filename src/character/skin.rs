@@ -25,6 +25,12 @@ use super::skeleton::{JointId, Skeleton};
 /// A symmetric 2×2 tensor stored as `[t₁₁, t₁₂, t₂₂]` (used for G⁰, η and ξ).
 pub type Sym2 = [f32; 3];
 
+/// Whether `t` is positive definite (what a rest metric must be): `t₁₁ > 0`, `t₂₂ > 0` and a
+/// positive determinant. False for any NaN component.
+pub fn is_positive_definite(t: &Sym2) -> bool {
+    t[0] > 0.0 && t[2] > 0.0 && t[0] * t[2] - t[1] * t[1] > 0.0
+}
+
 /// Node strides `(around, along)` of [`Skin::fat_normals`] on an `around × along` skin: the
 /// fewest nodes that span at least one spacing of a 32×32 skin, `⌈points / 32⌉` in each
 /// direction (at least 1, around at most half the ring). With one-node differences a 128×128
@@ -262,7 +268,7 @@ impl Skin {
             if !g.iter().all(|x| x.is_finite()) {
                 return Err(format!("skin: rest_metric[{k}] is not finite"));
             }
-            if g[0] <= 0.0 || g[2] <= 0.0 || g[0] * g[2] - g[1] * g[1] <= 0.0 {
+            if !is_positive_definite(g) {
                 return Err(format!(
                     "skin: rest_metric[{k}] = {g:?} is not positive definite"
                 ));
