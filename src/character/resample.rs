@@ -575,7 +575,6 @@ mod tests {
                     depth < 1e-4,
                     "{name} {around}x{along}: {depth} m deep for the simulator"
                 );
-                eprintln!("{name} {around}x{along}: model {model} m, simulator {depth} m");
             }
         }
     }
