@@ -164,7 +164,7 @@ fn resampled_simulation(
 /// the metric of the old chords, against which a point off its chord (every pushed-out point)
 /// is stretched, and the skin pressed itself back into its muscles: the wombat resampled from
 /// 16×16 to 64×64 took 2898 steps, 745 of them rejected by the constraints, for 2 s at rest,
-/// where the same skin built at 64×64 takes 564 and none. A point where the sum is not positive
+/// where the same skin built at 64×64 took 564 and none (the wombat before session 36). A point where the sum is not positive
 /// definite (a strain larger than the new metric) keeps the interpolated rest metric.
 fn resampled_rest_metric(old: &Skin, new: &Skin, li: &[Lerp], lj: &[Lerp]) -> Vec<Sym2> {
     let strain: Vec<Sym2> = old
@@ -214,7 +214,8 @@ const PUSH_OUT_MARGIN_M: f32 = 5e-5;
 ///
 /// A new point lies on a chord of the old skin, and a chord cuts into a muscle where the skin
 /// bends sharply between two old rows: the 32×32 wombat's last free row resampled to 64×64
-/// (half way to the small ring at its snout) lay 28-37 mm inside its head, the penguin's 14 mm.
+/// (half way to the small ring that, until session 36, sat inside its head) lay 28-37 mm inside
+/// the head, the penguin's 14 mm.
 /// The simulation would make the same moves in its first constraint phase, but as corrections
 /// of that size: rejected first steps, a skin that jumps in the first frame, and a report whose
 /// largest correction is the start-up's (the wombat's 40 mm at 64×64, 65 mm at 128×128).

@@ -729,8 +729,12 @@ fn skin_resting_on_its_muscles_takes_the_largest_steps() {
     // pushes it back out every step. The contact-aware error estimate leaves that inward pull
     // to the constraints (ε_c), so Verlet's steps reach max_step_s; counting it
     // (Δ ≈ h² g / 2 ≤ ε_r) capped them at 9-11 ms. (Not the torso: at rest its steps reach
-    // about 10.5 ms, not max_step_s; why was not investigated.)
-    for name in ["penguin", "wombat", "arm"] {
+    // about 10.5 ms, not max_step_s; why was not investigated.) The wombat's reach 97 % of
+    // it (15.6 ms of 16): its largest error at rest sits in the skin under its belly, where the
+    // fat bulges, not at a contact. Without the contact-aware estimate (`drop_inward_error` made
+    // a no-op, checked in session 36) the largest steps in this second were 13.6 ms (penguin),
+    // 12.8 ms (wombat) and 15.4 ms (arm), so each fraction below still tells the two apart.
+    for (name, fraction) in [("penguin", 0.99), ("wombat", 0.95), ("arm", 0.99)] {
         let (mut m, mut poses) = settled_at_rest(name);
         assert!(
             m.core.contacts.contact_points() > 0,
@@ -740,7 +744,7 @@ fn skin_resting_on_its_muscles_takes_the_largest_steps() {
         let max_step_s = m.tolerances().max_step_s;
         eprintln!("{name} at rest: {r:?}");
         assert!(
-            r.max_step_s >= 0.99 * max_step_s,
+            r.max_step_s >= fraction * max_step_s,
             "{name}: largest step {} s, max {max_step_s} s",
             r.max_step_s
         );
