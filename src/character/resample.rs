@@ -164,8 +164,9 @@ fn resampled_simulation(
 /// the metric of the old chords, against which a point off its chord (every pushed-out point)
 /// is stretched, and the skin pressed itself back into its muscles: the wombat resampled from
 /// 16×16 to 64×64 took 2898 steps, 745 of them rejected by the constraints, for 2 s at rest,
-/// where the same skin built at 64×64 took 564 and none (the wombat before session 36). A point where the sum is not positive
-/// definite (a strain larger than the new metric) keeps the interpolated rest metric.
+/// where the same skin built at 64×64 took 564 and none (the wombat before session 36). A point
+/// where the sum is not positive definite (a strain larger than the new metric) keeps the
+/// interpolated rest metric.
 fn resampled_rest_metric(old: &Skin, new: &Skin, li: &[Lerp], lj: &[Lerp]) -> Vec<Sym2> {
     let strain: Vec<Sym2> = old
         .rest_metric
@@ -218,7 +219,7 @@ const PUSH_OUT_MARGIN_M: f32 = 5e-5;
 /// the head, the penguin's 14 mm.
 /// The simulation would make the same moves in its first constraint phase, but as corrections
 /// of that size: rejected first steps, a skin that jumps in the first frame, and a report whose
-/// largest correction is the start-up's (the wombat's 40 mm at 64×64, 65 mm at 128×128).
+/// largest correction is the start-up's (that wombat's 40 mm at 64×64, 65 mm at 128×128).
 fn push_fat_points_out(
     skin: &mut Skin,
     new_point: &[bool],
