@@ -729,11 +729,13 @@ fn skin_resting_on_its_muscles_takes_the_largest_steps() {
     // pushes it back out every step. The contact-aware error estimate leaves that inward pull
     // to the constraints (ε_c), so Verlet's steps reach max_step_s; counting it
     // (Δ ≈ h² g / 2 ≤ ε_r) capped them at 9-11 ms. (Not the torso: at rest its steps reach
-    // about 10.5 ms, not max_step_s; why was not investigated.) The wombat's reach 97 % of
-    // it (15.6 ms of 16): its largest error at rest sits in the skin under its belly, where the
-    // fat bulges, not at a contact. Without the contact-aware estimate (`drop_inward_error` made
-    // a no-op, checked in session 36) the largest steps in this second were 13.6 ms (penguin),
-    // 12.8 ms (wombat) and 15.4 ms (arm), so each fraction below still tells the two apart.
+    // about 10.5 ms, not max_step_s: two points on top of its shoulders bob by about 0.2 mm
+    // every 9-10 steps and set most of its steps; docs/simulate.md, after the wombat's face.)
+    // The wombat's reach 97 % of it (15.6 ms of 16): its largest error at rest sits in the
+    // skin under its belly, where the fat bulges, not at a contact. Without the contact-aware
+    // estimate (`drop_inward_error` made a no-op, checked in session 36) the largest steps in
+    // this second were 13.6 ms (penguin), 12.8 ms (wombat) and 15.4 ms (arm), so each fraction
+    // below still tells the two apart.
     for (name, fraction) in [("penguin", 0.99), ("wombat", 0.95), ("arm", 0.99)] {
         let (mut m, mut poses) = settled_at_rest(name);
         assert!(
