@@ -630,7 +630,7 @@ impl Clock for TickingClock {
 /// A skin resampled finer rests as calmly as the same skin built at that resolution. With the
 /// rest metric interpolated (the old chords' metric), the 32×32 wombat at 64×64 pressed itself
 /// into its muscles: 2 s at rest took 2416 steps, 766 of them rejected by the constraints
-/// (built at 64×64: 564 and none); now 1 s takes about 230 and none.
+/// (built at 64×64: 564 and none); now 1 s takes about 220 and none.
 #[test]
 fn a_resampled_skin_rests_like_one_built_at_its_resolution() {
     let resampled = examples::build("wombat", 32, 32)
@@ -731,8 +731,8 @@ fn skin_resting_on_its_muscles_takes_the_largest_steps() {
     // (Δ ≈ h² g / 2 ≤ ε_r) capped them at 9-11 ms. (Not the torso: at rest its steps reach
     // about 10.5 ms, not max_step_s: two points on top of its shoulders bob by about 0.2 mm
     // every 9-10 steps and set most of its steps; docs/simulate.md, after the wombat's face.)
-    // The wombat's reach 97 % of it (15.6 ms of 16): its largest error at rest sits in the
-    // skin under its belly, where the fat bulges, not at a contact. Without the contact-aware
+    // The wombat's reach 97 % of it (15.6 ms of 16): its largest error at rest sits on the
+    // underside, under its belly, where the fat bulges. Without the contact-aware
     // estimate (`drop_inward_error` made a no-op, checked in session 36) the largest steps in
     // this second were 13.6 ms (penguin), 12.8 ms (wombat) and 15.4 ms (arm), so each fraction
     // below still tells the two apart.
