@@ -93,14 +93,18 @@ pub fn materials(name: &str) -> Materials {
 
 /// Builds one example character at an `around × along` skin resolution.
 pub fn build(name: &str, around: u32, along: u32) -> Option<Character> {
-    let body = match name {
-        "penguin" => penguin(),
-        "wombat" => wombat(),
-        "torso" => torso(),
-        "arm" => arm(),
-        _ => return None,
-    };
-    Some(finish(body, around, along))
+    body(name).map(|body| finish(body, around, along))
+}
+
+/// One example's design (skeleton, muscles, motions, how to wrap its skin), by name.
+fn body(name: &str) -> Option<Body> {
+    match name {
+        "penguin" => Some(penguin()),
+        "wombat" => Some(wombat()),
+        "torso" => Some(torso()),
+        "arm" => Some(arm()),
+        _ => None,
+    }
 }
 
 /// Writes every example at every resolution into `dir` (atomically), returning the paths.
@@ -1369,25 +1373,30 @@ mod file_tests {
 
     #[test]
     fn skins_reach_past_every_muscle_along_their_axis() {
-        // A skin closed by small rings at both ends covers the whole muscle layer: along the
-        // line from the bottom ring's centre to the top ring's, every shape's surface lies
-        // between the two rings. (The torso and the arm are open tubes, cut at the hips, the
-        // neck, the shoulder and the wrist, where muscles may reach past the rings.) Until
-        // session 36 the wombat's skin ended at its head's centre, 12 cm short of its snout's
-        // tip, with its nose ring inside the head.
-        for name in ["penguin", "wombat"] {
+        // A skin closed by small rings at both ends (the penguin's and the wombat's) covers
+        // the whole muscle layer: along the line from the bottom ring's centre to the top
+        // ring's, every shape's surface lies between the two rings. (The torso and the arm are
+        // open tubes, cut at the hips, the neck, the shoulder and the wrist, where muscles may
+        // reach past the rings.) Until session 36 the wombat's skin ended at its head's
+        // centre, 12 cm short of its snout's tip, with its nose ring inside the head.
+        let closed = NAMES.into_iter().filter(|name| {
+            let tube = body(name).expect("known example").tube;
+            matches!(
+                tube.radius,
+                Radius::Wrap {
+                    bottom_radius_m: Some(_),
+                    top_radius_m: Some(_)
+                }
+            )
+        });
+        let mut checked = Vec::new();
+        for name in closed {
+            checked.push(name);
             let c = build(name, 32, 32).expect("known example");
-            let (instances, points) = c.neutral_layout();
-            let m = c.skin.around as usize;
-            let ring_centre = |row: usize| {
-                points[row * m..(row + 1) * m]
-                    .iter()
-                    .map(|&(p, _)| p)
-                    .sum::<Vec3>()
-                    / m as f32
-            };
-            let bottom = ring_centre(0);
-            let top = ring_centre(c.skin.along as usize - 1);
+            let (instances, _) = c.neutral_layout();
+            let skin = &c.skin;
+            let bottom = skin.ring_center(&skin.positions_m, 0);
+            let top = skin.ring_center(&skin.positions_m, skin.along - 1);
             let length = (top - bottom).length();
             let axis = (top - bottom) / length;
             // Surface points of each shape: projections of points on a large sphere around it.
@@ -1414,6 +1423,7 @@ mod file_tests {
                 }
             }
         }
+        assert_eq!(checked, ["penguin", "wombat"], "the closed skins");
     }
 
     /// Ring points of one fixed row, each with its fat point moved in by `margin_m` more, in
