@@ -53,6 +53,17 @@ fn simulate_prints_the_documented_json() {
         assert!(v[key].is_number(), "{key} missing in {v}");
     }
     assert_eq!(v["hold_contacts"], true, "the default");
+    // The machine the times were measured on: the vector code that ran, and the CPU's name
+    // where Linux gives it.
+    let simd = v["machine"]["simd"].as_str().expect("a string");
+    assert!(["baseline", "avx2+fma", "avx512"].contains(&simd), "{v}");
+    match std::fs::read_to_string("/proc/cpuinfo") {
+        Ok(info) if info.contains("model name") => {
+            let cpu = v["machine"]["cpu"].as_str().expect("named on Linux");
+            assert!(!cpu.is_empty() && info.contains(cpu), "{cpu:?}");
+        }
+        _ => assert!(v["machine"]["cpu"].is_null(), "{v}"),
+    }
     assert!(
         v["interrupted_at_s"].is_null(),
         "not stopped by Ctrl-C: {v}"
@@ -140,7 +151,8 @@ fn simulate_table_and_resolution_and_every_integrator() {
         assert!(
             text.contains("Timestep interval (ms)")
                 && text.contains("% Constraints")
-                && text.contains("Points pushed out"),
+                && text.contains("Points pushed out")
+                && text.contains(" vector code)"),
             "{text}"
         );
         assert!(text.contains(integrator));

@@ -96,6 +96,8 @@ struct Report {
     file: Option<String>,
     motion: Option<String>,
     integrator: &'static str,
+    /// What ran it: wall times and point-steps per second are only comparable on one machine.
+    machine: Machine,
     resolution: [u32; 2],
     skin_points: usize,
     muscles: MuscleCounts,
@@ -150,6 +152,34 @@ struct Report {
     /// not interrupted.
     interrupted_at_s: Option<f64>,
     point_steps_per_second: f64,
+}
+
+/// The machine a report's times were measured on.
+#[derive(Debug, Serialize)]
+struct Machine {
+    /// The CPU's model name (Linux's `/proc/cpuinfo`); none (null) where it cannot be read.
+    cpu: Option<String>,
+    /// The vector instructions the simulation's hot loops run with
+    /// ([`leman::sim::simd::SimdLevel::name`]).
+    simd: &'static str,
+}
+
+impl Machine {
+    fn this_one() -> Self {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|info| {
+                info.lines()
+                    .filter_map(|line| line.split_once(':'))
+                    .find(|(key, _)| key.trim() == "model name")
+                    .map(|(_, value)| value.trim().to_string())
+                    .filter(|name| !name.is_empty())
+            });
+        Machine {
+            cpu,
+            simd: leman::sim::simd::simd_level().name(),
+        }
+    }
 }
 
 #[derive(Debug, Serialize, Default)]
@@ -318,6 +348,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         file: file.map(|p| p.display().to_string()),
         motion: motion.map(|m| m.name),
         integrator: kind.name(),
+        machine: Machine::this_one(),
         resolution: [m, n],
         skin_points: model.point_count(),
         muscles,
@@ -603,6 +634,13 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         r.motion.as_deref().unwrap_or("(neutral posture)")
     )?;
     writeln!(out, "{:<28}{}", "Solver", r.integrator)?;
+    writeln!(
+        out,
+        "{:<28}{} ({} vector code)",
+        "Machine",
+        r.machine.cpu.as_deref().unwrap_or("unknown CPU"),
+        r.machine.simd
+    )?;
     writeln!(
         out,
         "{:<28}[{:.2}–{:.2}]",

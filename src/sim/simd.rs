@@ -68,6 +68,15 @@ pub enum SimdLevel {
 impl SimdLevel {
     /// Every level, lowest first.
     pub const ALL: [SimdLevel; 3] = [SimdLevel::Baseline, SimdLevel::Avx2Fma, SimdLevel::Avx512];
+
+    /// A short name for reports: `baseline`, `avx2+fma` or `avx512`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SimdLevel::Baseline => "baseline",
+            SimdLevel::Avx2Fma => "avx2+fma",
+            SimdLevel::Avx512 => "avx512",
+        }
+    }
 }
 
 #[cfg(test)]
