@@ -728,9 +728,10 @@ fn skin_resting_on_its_muscles_takes_the_largest_steps() {
     // Neutral posture, gravity on: the skin settles onto the muscles and the constraint phase
     // pushes it back out every step. The contact-aware error estimate leaves that inward pull
     // to the constraints (ε_c), so Verlet's steps reach max_step_s; counting it
-    // (Δ ≈ h² g / 2 ≤ ε_r) capped them at 9-11 ms. (Not the torso: at rest its steps reach
-    // about 10.5 ms, not max_step_s: two points on top of its shoulders bob by about 0.2 mm
-    // every 9-10 steps and set most of its steps; docs/simulate.md, after the wombat's face.)
+    // (Δ ≈ h² g / 2 ≤ ε_r) capped them at 9-11 ms. (Not the torso: at rest its steps stay
+    // near 9-10 ms: the points on top of its shoulders sway sideways in a mode whose stability
+    // limit is 11-12 ms (traced on the right one), which the step control keeps excited up to
+    // ε_r; docs/simulate.md, after the wombat's face.)
     // The wombat's reach 97 % of it (15.6 ms of 16): its largest error at rest sits on the
     // underside, under its belly, where the fat bulges. Without the contact-aware
     // estimate (`drop_inward_error` made a no-op, checked in session 36) the largest steps in
