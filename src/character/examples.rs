@@ -191,8 +191,26 @@ struct Tube {
     /// Smoothing passes over the wrapped radii (each never goes below what keeps the fat
     /// layer outside the muscles).
     smooth_passes: u32,
+    /// Where the skin's rows sit along the axis.
+    rows: RowPlacement,
 }
 
+/// Where a tube's rows sit along its axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RowPlacement {
+    /// Evenly along the axis.
+    Even,
+    /// Evenly along a measure of the wrapped profile ([`profile_rows`]), so that where the
+    /// body's outline runs across the axis (a flat rump closing onto a small end ring) the rows
+    /// close up instead of leaving one long spoke from the end ring to the first row that
+    /// wraps the body.
+    Profile,
+}
+
+/// Fine stations per row interval of the profile that [`RowPlacement::Profile`] measures.
+const PROFILE_STATIONS_PER_ROW: u32 = 4;
+
+#[derive(Debug, Clone, Copy)]
 enum Radius {
     /// A tube of fixed radius (the arm).
     Constant(f32),
@@ -435,6 +453,7 @@ fn penguin() -> Body {
                 top_radius_m: Some(0.012),
             },
             smooth_passes: 3,
+            rows: RowPlacement::Even,
             fat_m: |s, angle| 0.015 + 0.01 * (PI * s).sin() * (0.5 + 0.5 * angle.sin()),
         },
         simulation: example_simulation(),
@@ -622,6 +641,7 @@ fn wombat() -> Body {
                 top_radius_m: Some(0.012),
             },
             smooth_passes: 3,
+            rows: RowPlacement::Profile,
             fat_m: wombat_fat_m,
         },
         simulation: example_simulation(),
@@ -951,6 +971,7 @@ fn torso() -> Body {
             },
             fat_m: |s, angle| 0.008 + 0.008 * (1.0 - s) * (0.5 + 0.5 * angle.sin()),
             smooth_passes: 12,
+            rows: RowPlacement::Even,
         },
         simulation: example_simulation(),
     }
@@ -1038,6 +1059,7 @@ fn arm() -> Body {
             radius: Radius::Constant(0.08),
             fat_m: arm_fat_m,
             smooth_passes: 0,
+            rows: RowPlacement::Even,
         },
         // Explicit Euler grows every lightly damped mode whose `h ω²` exceeds its damping rate;
         // the other 16×16 examples' damping absorbs that at 0.5 ms, the arm's light skin does
@@ -1079,6 +1101,58 @@ fn outermost_hit(instances: &[ShapeInstance], origin: Vec3, dir: Vec3, t_max: f3
         }
     }
     None
+}
+
+/// Axial fractions (0 at the tube's start, 1 at its end) of `along` rows spaced evenly along a
+/// measure of the tube's profile. `ring(s)` gives the ring at `s`, sampled at
+/// [`PROFILE_STATIONS_PER_ROW`] stations per row interval; between neighbouring stations the
+/// measure grows by the mean of their axial distance and the longest distance between matching
+/// ring points (half of each, so that a cap cannot draw more than about twice its share of
+/// rows and crowd them into a flat disc whose fat normals point along the axis), smoothed over
+/// one row interval either side (so that the spacing changes gradually from row to row, which
+/// the skin's finite differences and resampling need).
+fn profile_rows(along: u32, axis_length_m: f32, ring: impl Fn(f32) -> Vec<Vec3>) -> Vec<f32> {
+    let stations = (PROFILE_STATIONS_PER_ROW * (along - 1)) as usize;
+    let station_s = |f: usize| f as f32 / stations as f32;
+    let axial_m = axis_length_m / stations as f32;
+    let mut previous = ring(0.0);
+    let raw: Vec<f32> = (1..=stations)
+        .map(|f| {
+            let next = ring(station_s(f));
+            let longest = previous
+                .iter()
+                .zip(&next)
+                .map(|(a, b)| a.distance(*b))
+                .fold(0.0f32, f32::max);
+            previous = next;
+            0.5 * (axial_m + longest)
+        })
+        .collect();
+    let window = PROFILE_STATIONS_PER_ROW as usize;
+    let mut arc = Vec::with_capacity(stations + 1);
+    arc.push(0.0f32);
+    for f in 0..stations {
+        let near = &raw[f.saturating_sub(window)..(f + window + 1).min(stations)];
+        arc.push(arc[f] + near.iter().sum::<f32>() / near.len() as f32);
+    }
+    let total = arc[stations];
+    let mut f = 0usize;
+    (0..along)
+        .map(|j| {
+            if j == 0 {
+                return 0.0;
+            }
+            if j + 1 == along {
+                return 1.0;
+            }
+            let target = total * j as f32 / (along - 1) as f32;
+            while arc[f + 1] < target {
+                f += 1;
+            }
+            let within = (target - arc[f]) / (arc[f + 1] - arc[f]);
+            (f as f32 + within) / stations as f32
+        })
+        .collect()
 }
 
 fn finish(body: Body, around: u32, along: u32) -> Character {
@@ -1128,7 +1202,6 @@ fn finish(body: Body, around: u32, along: u32) -> Character {
     let e2 = e1.cross(axis);
     let n_points = (around * along) as usize;
     let mut radius = vec![0.0f32; n_points];
-    let mut required = vec![0.0f32; n_points];
     let mut fat = vec![0.0f32; n_points];
     let dirs: Vec<Vec3> = (0..around)
         .map(|i| {
@@ -1136,35 +1209,44 @@ fn finish(body: Body, around: u32, along: u32) -> Character {
             e1 * phi.cos() + e2 * phi.sin()
         })
         .collect();
-    for j in 0..along {
-        let s = j as f32 / (along - 1) as f32;
-        let centre = tube.start_m.lerp(tube.end_m, s);
+    // The radius of the ring at `s` along the axis in direction `i`: what keeps its fat layer
+    // outside every muscle, or the end ring's given radius.
+    let ring_radius = |s: f32, i: u32| -> f32 {
+        let end_radius = match tube.radius {
+            Radius::Wrap {
+                bottom_radius_m, ..
+            } if s == 0.0 => bottom_radius_m,
+            Radius::Wrap { top_radius_m, .. } if s == 1.0 => top_radius_m,
+            _ => None,
+        };
+        match (tube.radius, end_radius) {
+            (Radius::Constant(r), _) | (_, Some(r)) => r,
+            (Radius::Wrap { .. }, None) => {
+                let centre = tube.start_m.lerp(tube.end_m, s);
+                let fat = (tube.fat_m)(s, TAU * i as f32 / around as f32);
+                let hit = outermost_hit(&instances, centre, dirs[i as usize], 0.5);
+                hit.map_or(MIN_RADIUS_M, |t| t + fat + WRAP_MARGIN_M)
+                    .max(MIN_RADIUS_M)
+            }
+        }
+    };
+    let row_s = match tube.rows {
+        RowPlacement::Even => (0..along).map(|j| j as f32 / (along - 1) as f32).collect(),
+        RowPlacement::Profile => profile_rows(along, tube.start_m.distance(tube.end_m), |s| {
+            let centre = tube.start_m.lerp(tube.end_m, s);
+            (0..around)
+                .map(|i| centre + dirs[i as usize] * ring_radius(s, i))
+                .collect()
+        }),
+    };
+    for (j, &s) in (0..along).zip(&row_s) {
         for i in 0..around {
             let k = (j * around + i) as usize;
-            let phi = TAU * i as f32 / around as f32;
-            fat[k] = (tube.fat_m)(s, phi);
-            let end_radius = match tube.radius {
-                Radius::Wrap {
-                    bottom_radius_m, ..
-                } if j == 0 => bottom_radius_m,
-                Radius::Wrap { top_radius_m, .. } if j + 1 == along => top_radius_m,
-                _ => None,
-            };
-            let (r, need) = match tube.radius {
-                Radius::Constant(r) => (r, r),
-                Radius::Wrap { .. } => match end_radius {
-                    Some(r) => (r, r),
-                    None => {
-                        let hit = outermost_hit(&instances, centre, dirs[i as usize], 0.5);
-                        let need = hit.map_or(MIN_RADIUS_M, |t| t + fat[k] + WRAP_MARGIN_M);
-                        (need.max(MIN_RADIUS_M), need.max(MIN_RADIUS_M))
-                    }
-                },
-            };
-            radius[k] = r;
-            required[k] = need;
+            fat[k] = (tube.fat_m)(s, TAU * i as f32 / around as f32);
+            radius[k] = ring_radius(s, i);
         }
     }
+    let required = radius.clone();
     // Smooth the wrapped radii a little (never below what keeps the fat layer outside).
     if matches!(tube.radius, Radius::Wrap { .. }) {
         for _ in 0..tube.smooth_passes {
@@ -1184,8 +1266,7 @@ fn finish(body: Body, around: u32, along: u32) -> Character {
     }
     let position = |radius: &[f32], k: usize| {
         let (i, j) = ((k as u32) % around, (k as u32) / around);
-        let s = j as f32 / (along - 1) as f32;
-        tube.start_m.lerp(tube.end_m, s) + dirs[i as usize] * radius[k]
+        tube.start_m.lerp(tube.end_m, row_s[j as usize]) + dirs[i as usize] * radius[k]
     };
     let mut positions: Vec<Vec3> = (0..n_points).map(|k| position(&radius, k)).collect();
     // Push out any free point whose fat point (r − τ·n̂) is still inside a muscle.

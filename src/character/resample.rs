@@ -449,9 +449,11 @@ mod tests {
                 assert_eq!(r.skin.fat_m[new], c.skin.fat_m[old]);
                 // The rest metric is the finer grid's own differences there (the skin was
                 // drawn at rest), close to the coarse ones where the skin is smooth (measured:
-                // median 0.1 %, at most 9 % up to row 13); the last free row, next to the
-                // snout's small ring, is 10 % off (88 % before session 36, when it spanned the
-                // face to a ring inside the head with differences half as long).
+                // median 0.05 %, at most 10.9 % up to row 13, in rows 2-4 where the rump's
+                // rows, closer together since session 38, pass over the hind legs; 9 % before);
+                // the last free row, next to the snout's small ring, is 10 % off (88 % before
+                // session 36, when it spanned the face to a ring inside the head with
+                // differences half as long).
                 let (g, o) = (r.skin.rest_metric[new], c.skin.rest_metric[old]);
                 let off = (0..3).map(|x| (g[x] - o[x]).abs()).fold(0.0f32, f32::max);
                 if (1..14).contains(&j) {
@@ -469,7 +471,7 @@ mod tests {
                 assert!((n.stiffness_n_per_m - o.stiffness_n_per_m * scale).abs() < 1e-6);
             }
         }
-        assert!(metric_off.iter().all(|&d| d < 0.1), "{metric_off:?}");
+        assert!(metric_off.iter().all(|&d| d < 0.12), "{metric_off:?}");
         metric_off.sort_by(f32::total_cmp);
         assert!(metric_off[metric_off.len() / 2] < 0.01, "{metric_off:?}");
         // Total mass is preserved; midpoints are interpolated.
