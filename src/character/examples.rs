@@ -1107,10 +1107,14 @@ fn outermost_hit(instances: &[ShapeInstance], origin: Vec3, dir: Vec3, t_max: f3
 /// measure of the tube's profile. `ring(s)` gives the ring at `s`, sampled at
 /// [`PROFILE_STATIONS_PER_ROW`] stations per row interval; between neighbouring stations the
 /// measure grows by the mean of their axial distance and the longest distance between matching
-/// ring points (half of each, so that a cap cannot draw more than about twice its share of
-/// rows and crowd them into a flat disc whose fat normals point along the axis), smoothed over
-/// one row interval either side (so that the spacing changes gradually from row to row, which
-/// the skin's finite differences and resampling need).
+/// ring points (the axial half leaves the ends fewer rows than the longest distance alone
+/// would, and more for the body), smoothed over one row interval either side (so that the
+/// spacing changes gradually from row to row: unsmoothed, a 32×31 resampling of the 16×16
+/// wombat differed from its rest metric by more than 12 % at some coincident points, smoothed
+/// by at most 10.9 %).
+/// A rounded end gets short spokes from it; an end where a muscle comes close to a small end
+/// ring does not (the penguin's tail: its first rows crowd over the tail with their fat
+/// normals along the axis, and the generator's push-out cannot get them out).
 fn profile_rows(along: u32, axis_length_m: f32, ring: impl Fn(f32) -> Vec<Vec3>) -> Vec<f32> {
     let stations = (PROFILE_STATIONS_PER_ROW * (along - 1)) as usize;
     let station_s = |f: usize| f as f32 / stations as f32;
