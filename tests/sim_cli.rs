@@ -477,6 +477,30 @@ fn simulate_hold_contacts_switches_the_resting_contact() {
     assert!(err.contains("--hold-contacts"), "{err}");
 }
 
+/// `--free-steps` lets the steps run past the 1/30 s slice ends: the report says so, the run
+/// still covers exactly `--seconds`, and it takes fewer steps than landing on every slice (at
+/// least three a slice with the examples' 16 ms cap).
+#[test]
+fn simulate_free_steps_do_not_land_on_the_slices() {
+    let args = ["penguin_16", "--seconds", "1"];
+    let landed = simulate_json(&args);
+    let mut free_args = args.to_vec();
+    free_args.push("--free-steps");
+    let free = simulate_json(&free_args);
+    assert_eq!(landed["free_steps"], false);
+    assert_eq!(free["free_steps"], true);
+    let number = |v: &serde_json::Value, key: &str| v[key].as_f64().expect("number");
+    assert_eq!(number(&free, "sim_seconds"), 1.0, "{free}");
+    assert!(number(&landed, "steps") >= 90.0, "{landed}");
+    assert!(
+        number(&free, "steps") < number(&landed, "steps"),
+        "free {free}\nlanded {landed}"
+    );
+    let table = simulate(&free_args);
+    assert!(table.contains("Step sequence"), "{table}");
+    assert!(!simulate(&args).contains("Step sequence"));
+}
+
 /// Starts `leman simulate ARGS --json`, sends it SIGINT (as Ctrl-C does) after `after`, and
 /// returns its exit code, standard output and standard error.
 fn simulate_interrupted(

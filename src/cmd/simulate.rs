@@ -64,6 +64,11 @@ pub struct Args {
     /// this option are slower than without.
     #[arg(long)]
     pub sample_depth: bool,
+    /// Let steps run past the 1/30 s slice ends instead of landing on each: the integrator's
+    /// own step sequence, for comparing integrators or simulators (the workstation's frames
+    /// land, and by default so does this report). The run still ends exactly at `--seconds`.
+    #[arg(long)]
+    pub free_steps: bool,
 }
 
 /// Smallest and largest accepted step, seconds.
@@ -134,6 +139,8 @@ struct Report {
     recheck_fraction: f32,
     /// Whether muscles held the skin resting on them.
     hold_contacts: bool,
+    /// Whether steps ran past the slice ends (`--free-steps`) instead of landing on them.
+    free_steps: bool,
     /// Constraint phases run (accepted steps and constraint rejections).
     constraint_phases: u64,
     /// Mean re-check passes per constraint phase.
@@ -310,8 +317,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             character.clone(),
             kind,
             motion.as_ref(),
-            seconds,
-            args.sample_depth,
+            RunPlan {
+                seconds,
+                sample_depth: args.sample_depth,
+                free_steps: args.free_steps,
+            },
             &stop,
             &|t_s| progress.set_position((done_ms + t_s * 1000.0) as u64),
         )?;
@@ -385,6 +395,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         held_points_per_step: total.held_per_step().unwrap_or(0.0),
         recheck_fraction: character.simulation.recheck_fraction,
         hold_contacts: character.simulation.hold_contacts,
+        free_steps: args.free_steps,
         constraint_phases: total.constraint_phases,
         recheck_passes_per_phase: rechecks.0,
         rechecked_points_per_phase: rechecks.1,
@@ -520,19 +531,30 @@ impl Run {
     }
 }
 
+/// How one run is paced and what it samples.
+#[derive(Debug, Clone, Copy)]
+struct RunPlan {
+    /// Simulated seconds.
+    seconds: f64,
+    /// Find the deepest fat point after every slice (`--sample-depth`).
+    sample_depth: bool,
+    /// Let steps pass the slice ends (`--free-steps`).
+    free_steps: bool,
+}
+
 /// The shortest last slice `run_once` makes, seconds; a shorter remainder joins the slice before.
 const SLIVER_S: f64 = 1e-3;
 
 /// Runs `character` from its initial state through `motion` (the neutral posture if none) for
-/// `seconds` of simulated time in 1/30 s slices, as the app's frames would, with no wall-clock
-/// budget; the wall time is that of the simulation alone. The run ends early, at the next step
-/// attempt, once `stop` is set; `progress` is told the simulated time after every slice.
+/// `plan.seconds` of simulated time in 1/30 s slices, landing on each as the app's frames
+/// would (unless `plan.free_steps`), with no wall-clock budget; the wall time is that of the
+/// simulation alone. The run ends early, at the next step attempt, once `stop` is set;
+/// `progress` is told the simulated time after every slice.
 fn run_once(
     character: Character,
     kind: IntegratorKind,
     motion: Option<&leman::character::Motion>,
-    seconds: f64,
-    sample_depth: bool,
+    plan: RunPlan,
     stop: &AtomicBool,
     progress: &dyn Fn(f64),
 ) -> anyhow::Result<Run> {
@@ -552,21 +574,32 @@ fn run_once(
     let mut target = 0.0f64;
     let mut until_stopped = || !stop.load(Ordering::Relaxed);
     let mut interrupted = false;
-    while target < seconds {
+    while target < plan.seconds {
         // A remainder under a millisecond joins this slice instead of becoming a sliver step
         // of its own (`--seconds 0.1005` would end with a 0.5 ms step, which would also show
         // as the smallest step in the report).
         let next = target + slice;
-        target = if seconds - next < SLIVER_S {
-            seconds
+        target = if plan.seconds - next < SLIVER_S {
+            plan.seconds
         } else {
             next
         };
         let start = clock.now();
-        let r = model.advance(target, poses, &mut until_stopped, Some(&clock));
+        // Free steps pass a slice's end by up to one step, but never the run's.
+        let r = if plan.free_steps {
+            model.advance_past(
+                target,
+                plan.seconds,
+                poses,
+                &mut until_stopped,
+                Some(&clock),
+            )
+        } else {
+            model.advance(target, poses, &mut until_stopped, Some(&clock))
+        };
         wall += clock.now().saturating_sub(start);
         total.merge(&r);
-        if sample_depth {
+        if plan.sample_depth {
             // Outside the timed part: a brute-force check of every point against every shape.
             depths_m.push(model.max_depth_m());
         }
@@ -682,6 +715,13 @@ fn print_table(r: &Report, wall: Duration, out: &mut impl Write) -> std::io::Res
         "{:<28}{} accepted, {} rejected ({} by constraints), {} forced",
         "Steps", r.steps, r.rejected_steps, r.constraint_rejections, r.forced_steps
     )?;
+    if r.free_steps {
+        writeln!(
+            out,
+            "{:<28}free (not landed on the 1/30 s slice ends)",
+            "Step sequence"
+        )?;
+    }
     writeln!(
         out,
         "{:<28}{:.3e}",

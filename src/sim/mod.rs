@@ -441,6 +441,29 @@ pub trait DeformationModel {
         clock: Option<&dyn Clock>,
     ) -> AdvanceReport;
 
+    /// Like [`advance`](Self::advance), but the steps keep the size the step control chose
+    /// instead of being shortened to land on `target_time_s`: the call ends at the first
+    /// accepted step that reaches the target, which may pass it by up to one step, though never
+    /// past `end_time_s` (a step that would is shortened to land there, as `advance` lands on
+    /// its target). For callers that only need to keep up with a moving target and are not
+    /// shown the state at it, such as a headless run paced in slices: landing on every slice
+    /// end costs steps (`leman simulate --free-steps` in `docs/simulate.md`).
+    /// `advance_past(t, t, …)` is `advance(t, …)`. The report's `time_s` says where the call
+    /// stopped.
+    ///
+    /// The default lands on the target, which also reaches it.
+    fn advance_past(
+        &mut self,
+        target_time_s: f64,
+        end_time_s: f64,
+        poses: &mut dyn PoseSource,
+        budget: &mut dyn StepBudget,
+        clock: Option<&dyn Clock>,
+    ) -> AdvanceReport {
+        let _ = end_time_s;
+        self.advance(target_time_s, poses, budget, clock)
+    }
+
     /// Writes the deformed surface into `out` (reusing its storage).
     fn surface_mesh_into(&self, out: &mut SurfaceMesh);
 

@@ -1047,7 +1047,25 @@ impl DeformationModel for SurfaceModel {
         budget: &mut dyn StepBudget,
         clock: Option<&dyn Clock>,
     ) -> AdvanceReport {
+        self.advance_past(target_time_s, target_time_s, poses, budget, clock)
+    }
+
+    fn advance_past(
+        &mut self,
+        target_time_s: f64,
+        end_time_s: f64,
+        poses: &mut dyn PoseSource,
+        budget: &mut dyn StepBudget,
+        clock: Option<&dyn Clock>,
+    ) -> AdvanceReport {
         let begin = clock.map(|c| c.now());
+        // Steps are shortened only to land on the end; a target short of it is reached by the
+        // first step that passes it. An end before the target (or NaN) is the target.
+        let end_time_s = if end_time_s >= target_time_s {
+            end_time_s
+        } else {
+            target_time_s
+        };
         let mut report = AdvanceReport::default();
         if !self.state_is_finite() {
             report.nonfinite_events += 1;
@@ -1063,7 +1081,7 @@ impl DeformationModel for SurfaceModel {
             if !budget.may_step() {
                 break;
             }
-            let remaining = target_time_s - self.core.t_s;
+            let remaining = end_time_s - self.core.t_s;
             let planned = self.core.step_s.max(min_step);
             // Avoid a sliver at the end: split the rest evenly if it is just over one step.
             let h = if remaining <= planned {

@@ -957,6 +957,65 @@ fn pushed_points_count_distinct_contacts_per_step() {
     );
 }
 
+/// `advance_past` keeps the step control's own steps: paced in 1/30 s slices it takes exactly
+/// the steps of one call to the end (bit for bit), each call stops at or past its slice's end by
+/// less than one step, never past the end it was given, and the run lands on that end. Landing
+/// on every slice instead (`advance`) takes more steps: the 16 ms cap cannot fit a 33.3 ms
+/// slice in two, so every slice is at least three.
+#[test]
+fn advance_past_runs_the_step_controls_own_steps_through_the_slices() {
+    let (start, motion) = model_and_motion("torso", 16);
+    let max_step_s = start.core.tolerances.max_step_s;
+    let end_s = 1.0;
+    let mut poses = MotionPoses(&motion);
+    let mut whole = start.clone();
+    let one_call = whole.advance(end_s, &mut poses, &mut Unlimited, None);
+    assert!(one_call.reached_target());
+    let (mut free, mut landed) = (start.clone(), start);
+    let (mut free_report, mut landed_report) = (AdvanceReport::default(), AdvanceReport::default());
+    for k in 1..=30 {
+        let target = f64::from(k) / 30.0;
+        let r = free.advance_past(target, end_s, &mut poses, &mut Unlimited, None);
+        assert!(r.reached_target(), "slice {k}");
+        assert!(
+            free.time_s() >= target - TIME_RESOLUTION_S
+                && free.time_s() < target + max_step_s
+                && free.time_s() <= end_s,
+            "slice {k} ends at {target} s, the model at {} s",
+            free.time_s()
+        );
+        free_report.merge(&r);
+        landed_report.merge(&landed.advance(target, &mut poses, &mut Unlimited, None));
+        assert_eq!(landed.time_s(), target, "advance lands on slice {k}");
+    }
+    assert!((free.time_s() - end_s).abs() < TIME_RESOLUTION_S);
+    assert_eq!(
+        (free_report.steps, free_report.rejected_steps),
+        (one_call.steps, one_call.rejected_steps)
+    );
+    let bits = |m: &SurfaceModel| -> Vec<u32> {
+        m.core
+            .x
+            .iter()
+            .chain(&m.core.v)
+            .map(|v| v.to_bits())
+            .collect()
+    };
+    assert!(bits(&free) == bits(&whole), "the free run's state differs");
+    eprintln!("free steps: {free_report:?}\nlanded: {landed_report:?}");
+    assert!(landed_report.steps >= 90, "{landed_report:?}");
+    assert!(
+        free_report.steps < landed_report.steps,
+        "free {} steps, landed {}",
+        free_report.steps,
+        landed_report.steps
+    );
+    // An end before the target is the target: nothing runs past it.
+    let t = free.time_s() + 0.05;
+    free.advance_past(t, t - 0.04, &mut poses, &mut Unlimited, None);
+    assert!((free.time_s() - t).abs() < TIME_RESOLUTION_S);
+}
+
 /// Holding keeps the constraints' guarantee and the skin's motion: through 2 s of the torso's
 /// motion with and without holding, no fat point is left deeper than ε_c, holding spares most
 /// pushes and re-checks, and the skin stays no farther from where the paper's projection alone
