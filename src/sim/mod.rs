@@ -7,7 +7,9 @@
 //! - drive: [`DeformationModel::advance`] to a target simulation time, given a [`PoseSource`]
 //!   (the skeleton posture at any simulation time: a motion, IK or a tool edit) and a
 //!   [`StepBudget`] asked before every step attempt ("may I take another step?") so the frame
-//!   scheduler keeps control of wall-clock time. It returns an [`AdvanceReport`].
+//!   scheduler keeps control of wall-clock time. It returns an [`AdvanceReport`]. `advance`
+//!   lands on its target, as a frame to be drawn needs; [`DeformationModel::advance_past`]
+//!   keeps the step control's own steps and may stop up to one step past it (headless runs).
 //! - read: [`DeformationModel::surface_mesh_into`] fills a [`SurfaceMesh`] (positions, normals,
 //!   triangle indices; always finite).
 //! - edit: [`DeformationModel::apply`] takes a [`ParameterChange`] between steps.
