@@ -155,8 +155,9 @@ pub trait FrameWork {
     fn simulate(&mut self, target_sim_s: f64, budget: Duration) -> SimProgress;
     /// Changes the skin resolution (mass points) before the next simulation step.
     fn set_skin_points(&mut self, points: u32);
-    /// Renders both eyes with the poses of `read` (phase 5).
-    fn render(&mut self, read: &TrackerRead, sim_time_s: f64);
+    /// Renders both eyes with the poses of `read` (phase 5), the character at simulation time
+    /// `shown_time_s` (the frame's target, or where the simulation stopped short of it).
+    fn render(&mut self, read: &TrackerRead, shown_time_s: f64);
 }
 
 /// Something the scheduler reports once, when it happens.
@@ -249,8 +250,14 @@ pub struct FrameRecord {
     pub sim_steps: u32,
     /// Rejected simulation steps this frame.
     pub sim_rejected: u32,
-    /// Simulation time after this frame, seconds.
+    /// Simulation time after this frame, seconds: at or past `shown_time_s` (by less than one
+    /// step) unless the simulation fell short of its target.
     pub sim_time_s: f64,
+    /// The time the skeleton and the skin were drawn at this frame, seconds: the target
+    /// (`sim_target_s`), or `sim_time_s` when the simulation fell short of it. 0 in logs
+    /// written before it existed.
+    #[serde(default)]
+    pub shown_time_s: f64,
     /// Simulated time advanced this frame, seconds.
     pub sim_advanced_s: f64,
     /// Where the simulation should be after this frame, seconds.
@@ -562,7 +569,11 @@ impl Scheduler {
         let second = work.read_trackers(t);
         read_wall += clock.now().saturating_sub(t);
         let t = clock.now();
-        work.render(&second, self.sim_time_s);
+        // The time drawn: the frame's target, or where the simulation stopped short of it. A
+        // simulation may step past its target (by less than one of its steps) and draws its
+        // skin interpolated back to this time.
+        let shown = self.sim_time_s.min(self.sim_target_s);
+        work.render(&second, shown);
         let end = clock.now();
         let render_wall = end.saturating_sub(t);
         self.previous_render = render_wall;
@@ -579,6 +590,7 @@ impl Scheduler {
             sim_steps: steps,
             sim_rejected: rejected,
             sim_time_s: self.sim_time_s,
+            shown_time_s: shown,
             sim_advanced_s: advanced,
             sim_target_s: self.sim_target_s,
             sim_lost_s: sim_lost,

@@ -431,6 +431,15 @@ impl AppState {
         })
     }
 
+    /// The skin as it is drawn at `time_s`: interpolated back to it when the simulation has
+    /// stepped past it (see [`DeformationModel::surface_mesh_at_into`]).
+    fn draw_surface_at(&mut self, time_s: f64) {
+        if let Some(model) = &self.model {
+            model.surface_mesh_at_into(time_s, &mut self.surface);
+            self.skin_grid = model.resolution();
+        }
+    }
+
     fn refresh_surface(&mut self) {
         match &self.model {
             Some(model) => {
@@ -587,8 +596,12 @@ impl AppState {
             Some(m) => m.posture_at_into(t, out),
             None => out.clone_from(&neutral),
         };
-        let report = model.advance(
+        // Steps are not shortened to land on the frame's time: the skin is drawn there by
+        // interpolation (`render`), and landing every frame would cap the steps near 11 ms at
+        // 60 Hz (docs/simulate.md, `--free-steps`).
+        let report = model.advance_past(
             target_s,
+            f64::INFINITY,
             &mut poses as &mut dyn PoseSource,
             &mut may_step,
             Some(clock),
@@ -608,16 +621,12 @@ impl AppState {
         } else if report.steps > 0 {
             self.sim_stalled_at_s = None;
         }
-        let progress = SimProgress {
+        SimProgress {
             steps: u32::try_from(report.steps).unwrap_or(u32::MAX),
             rejected: u32::try_from(report.rejected_steps).unwrap_or(u32::MAX),
             sim_time_s: report.time_s,
             stalled,
-        };
-        if report.steps > 0 {
-            self.refresh_surface();
         }
-        progress
     }
 
     fn set_skin_points(&mut self, points: u32) {
@@ -716,13 +725,14 @@ impl FrameWork for AppFrame<'_> {
         self.state.set_skin_points(points);
     }
 
-    fn render(&mut self, read: &TrackerRead, sim_time_s: f64) {
+    fn render(&mut self, read: &TrackerRead, shown_time_s: f64) {
         let state = &mut *self.state;
         state.reads_this_frame = 0;
-        state.shown_time_s = sim_time_s;
-        // The skeleton and shapes shown are those of the time the skin has reached, so the
-        // skin and what it wraps stay consistent when the simulation lags its target.
-        state.posture_at(sim_time_s);
+        state.shown_time_s = shown_time_s;
+        // The skeleton, the shapes and the skin are all drawn at the time shown: the frame's
+        // target, or where the simulation stopped when it lags (see `Scheduler::run_frame`).
+        state.posture_at(shown_time_s);
+        state.draw_surface_at(shown_time_s);
         let head = state.head_physical(read);
         match eye_views(&state.calibration, &head, &state.view_settings) {
             Ok(views) => state.last_views = Some(views),

@@ -64,9 +64,10 @@ pub struct Args {
     /// this option are slower than without.
     #[arg(long)]
     pub sample_depth: bool,
-    /// Let steps run past the 1/30 s slice ends instead of landing on each: the integrator's
-    /// own step sequence, for comparing integrators or simulators (the workstation's frames
-    /// land, and by default so does this report). The run still ends exactly at `--seconds`.
+    /// Let steps run past the 1/30 s slice ends instead of landing on each (the default, as
+    /// every documented figure was measured): the integrator's own step sequence, as the
+    /// workstation steps, for comparing integrators or simulators. The run still ends exactly
+    /// at `--seconds`.
     #[arg(long)]
     pub free_steps: bool,
 }
@@ -546,8 +547,8 @@ struct RunPlan {
 const SLIVER_S: f64 = 1e-3;
 
 /// Runs `character` from its initial state through `motion` (the neutral posture if none) for
-/// `plan.seconds` of simulated time in 1/30 s slices, landing on each as the app's frames
-/// would (unless `plan.free_steps`), with no wall-clock budget; the wall time is that of the
+/// `plan.seconds` of simulated time in 1/30 s slices (frames of a 30 Hz display), landing on
+/// each unless `plan.free_steps`, with no wall-clock budget; the wall time is that of the
 /// simulation alone. The run ends early, at the next step attempt, once `stop` is set;
 /// `progress` is told the simulated time after every slice.
 fn run_once(

@@ -8,10 +8,13 @@
 //!   (the skeleton posture at any simulation time: a motion, IK or a tool edit) and a
 //!   [`StepBudget`] asked before every step attempt ("may I take another step?") so the frame
 //!   scheduler keeps control of wall-clock time. It returns an [`AdvanceReport`]. `advance`
-//!   lands on its target, as a frame to be drawn needs; [`DeformationModel::advance_past`]
-//!   keeps the step control's own steps and may stop up to one step past it (headless runs).
+//!   lands on its target; [`DeformationModel::advance_past`] keeps the step control's own
+//!   steps and may stop up to one step past it (the workstation's frames, which draw the skin
+//!   at the frame's time with [`DeformationModel::surface_mesh_at_into`], and
+//!   `leman simulate --free-steps`).
 //! - read: [`DeformationModel::surface_mesh_into`] fills a [`SurfaceMesh`] (positions, normals,
-//!   triangle indices; always finite).
+//!   triangle indices; always finite), [`DeformationModel::surface_mesh_at_into`] the same at a
+//!   time within the last step.
 //! - edit: [`DeformationModel::apply`] takes a [`ParameterChange`] between steps.
 //! - save: [`DeformationModel::snapshot`] / [`DeformationModel::restore`] (blow-up guard, undo,
 //!   baking), [`DeformationModel::set_resolution`].
@@ -447,9 +450,10 @@ pub trait DeformationModel {
     /// instead of being shortened to land on `target_time_s`: the call ends at the first
     /// accepted step that reaches the target, which may pass it by up to one step, though never
     /// past `end_time_s` (a step that would is shortened to land there, as `advance` lands on
-    /// its target). For callers that only need to keep up with a moving target and are not
-    /// shown the state at it, such as a headless run paced in slices: landing on every slice
-    /// end costs steps (`leman simulate --free-steps` in `docs/simulate.md`).
+    /// its target). For callers that keep up with a moving target: a headless run paced in
+    /// slices, or a frame loop that draws the state at each frame's time with
+    /// [`surface_mesh_at_into`](Self::surface_mesh_at_into). Landing on every slice or frame
+    /// costs steps (`leman simulate --free-steps` in `docs/simulate.md`).
     /// `advance_past(t, t, …)` is `advance(t, …)`. The report's `time_s` says where the call
     /// stopped.
     ///
@@ -468,6 +472,17 @@ pub trait DeformationModel {
 
     /// Writes the deformed surface into `out` (reusing its storage).
     fn surface_mesh_into(&self, out: &mut SurfaceMesh);
+
+    /// Writes the surface as it is drawn at `time_s` into `out`: after an
+    /// [`advance_past`](Self::advance_past) that stepped past the frame's time, interpolated
+    /// linearly between the states before and after the step that reached the target (the
+    /// normals from the interpolated positions). Clamped to those two states: a time at or
+    /// after the current one draws the current state. Without a step to interpolate over (at
+    /// the start, after a restore or a resolution change), and by default, the current state.
+    fn surface_mesh_at_into(&self, time_s: f64, out: &mut SurfaceMesh) {
+        let _ = time_s;
+        self.surface_mesh_into(out);
+    }
 
     /// Applies a parameter change (takes effect at the next step).
     fn apply(&mut self, change: &ParameterChange) -> Result<(), SimError>;

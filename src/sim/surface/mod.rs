@@ -132,6 +132,12 @@ struct Work {
     /// (world, SoA; see [`PhaseEnd::first`]), with holding off.
     first_mask: Vec<u8>,
     first_normal: [Vec<f32>; 3],
+    /// The whole grid (fixed rings included, SoA) before the last accepted step of the last
+    /// `advance` call, the one that reached its target, and its time (NaN when there is none:
+    /// at the start, after a restore or a resolution change). The skin is drawn interpolated
+    /// between it and the current state ([`DeformationModel::surface_mesh_at_into`]).
+    drawn_before: [Vec<f32>; 3],
+    drawn_before_t_s: f64,
 }
 
 /// The elastic surface layer model of one character.
@@ -244,6 +250,7 @@ impl SurfaceModel {
         let mut work = Work::default();
         work.broad.margin_m = 0.02;
         let mut model = Self { core, work };
+        model.forget_drawn_before();
         model.save_checkpoint();
         Ok(model)
     }
@@ -374,6 +381,12 @@ impl SurfaceModel {
 
     fn current_grid(&self) -> [Vec<f32>; 3] {
         let mut grid: [Vec<f32>; 3] = Default::default();
+        self.current_grid_into(&mut grid);
+        grid
+    }
+
+    /// [`Self::current_grid`] into `grid`'s storage.
+    fn current_grid_into(&self, grid: &mut [Vec<f32>; 3]) {
         let rings = if self.work.start_valid {
             self.work.kin.rings_start.clone()
         } else {
@@ -388,9 +401,51 @@ impl SurfaceModel {
             &rings,
             &rings,
             0.0,
-            &mut grid,
+            grid,
         );
-        grid
+    }
+
+    /// The triangle mesh of a whole grid (SoA, fixed rings included), with its normals; a
+    /// non-finite position or normal is drawn as the origin or +Y.
+    fn mesh_from_grid(&self, grid: &[Vec<f32>; 3], out: &mut SurfaceMesh) {
+        let (m, n) = (self.core.around, self.core.along);
+        let mut normals = Default::default();
+        forces::grid_normals(m, n, grid, &mut normals);
+        out.positions_m.clear();
+        out.normals.clear();
+        out.indices.clear();
+        for k in 0..m * n {
+            let p = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
+            let nr = Vec3::new(normals[0][k], normals[1][k], normals[2][k]);
+            out.positions_m
+                .push(if p.is_finite() { p } else { Vec3::ZERO });
+            out.normals.push(if nr.is_finite() { nr } else { Vec3::Y });
+        }
+        for j in 0..n - 1 {
+            for i in 0..m {
+                let ip = (i + 1) % m;
+                let p00 = (j * m + i) as u32;
+                let p10 = (j * m + ip) as u32;
+                let p01 = ((j + 1) * m + i) as u32;
+                let p11 = ((j + 1) * m + ip) as u32;
+                out.indices
+                    .extend_from_slice(&[p00, p01, p11, p00, p11, p10]);
+            }
+        }
+    }
+
+    /// Keeps the current state as the one the skin is drawn from before the step about to be
+    /// committed (see `Work::drawn_before`).
+    fn keep_drawn_before(&mut self) {
+        let mut before = std::mem::take(&mut self.work.drawn_before);
+        self.current_grid_into(&mut before);
+        self.work.drawn_before = before;
+        self.work.drawn_before_t_s = self.core.t_s;
+    }
+
+    /// Forgets the state before the last step (the current one no longer follows from it).
+    fn forget_drawn_before(&mut self) {
+        self.work.drawn_before_t_s = f64::NAN;
     }
 
     /// Skeleton-driven kinematics at time `t_s` into the "end" slots of the work area.
@@ -590,6 +645,7 @@ impl SurfaceModel {
     }
 
     fn restore_checkpoint(&mut self) {
+        self.forget_drawn_before();
         if self.work.checkpoint_x.len() == self.core.x.len() {
             self.core.x.clone_from(&self.work.checkpoint_x);
             self.core.v.clone_from(&self.work.checkpoint_v);
@@ -1098,6 +1154,11 @@ impl DeformationModel for SurfaceModel {
                     correction_m,
                     pushed,
                 } => {
+                    if self.core.t_s + h >= target_time_s - TIME_RESOLUTION_S {
+                        // The step that ends the call: its start is what the skin is drawn
+                        // from at times before its end.
+                        self.keep_drawn_before();
+                    }
                     self.commit(h);
                     consecutive_failures = 0;
                     report.steps += 1;
@@ -1187,31 +1248,23 @@ impl DeformationModel for SurfaceModel {
     }
 
     fn surface_mesh_into(&self, out: &mut SurfaceMesh) {
-        let (m, n) = (self.core.around, self.core.along);
-        let grid = self.current_grid();
-        let mut normals = Default::default();
-        forces::grid_normals(m, n, &grid, &mut normals);
-        out.positions_m.clear();
-        out.normals.clear();
-        out.indices.clear();
-        for k in 0..m * n {
-            let p = Vec3::new(grid[0][k], grid[1][k], grid[2][k]);
-            let nr = Vec3::new(normals[0][k], normals[1][k], normals[2][k]);
-            out.positions_m
-                .push(if p.is_finite() { p } else { Vec3::ZERO });
-            out.normals.push(if nr.is_finite() { nr } else { Vec3::Y });
-        }
-        for j in 0..n - 1 {
-            for i in 0..m {
-                let ip = (i + 1) % m;
-                let p00 = (j * m + i) as u32;
-                let p10 = (j * m + ip) as u32;
-                let p01 = ((j + 1) * m + i) as u32;
-                let p11 = ((j + 1) * m + ip) as u32;
-                out.indices
-                    .extend_from_slice(&[p00, p01, p11, p00, p11, p10]);
+        self.mesh_from_grid(&self.current_grid(), out);
+    }
+
+    fn surface_mesh_at_into(&self, time_s: f64, out: &mut SurfaceMesh) {
+        let mut grid = self.current_grid();
+        let (t0, t1) = (self.work.drawn_before_t_s, self.core.t_s);
+        let before = &self.work.drawn_before;
+        if t0 < t1 && time_s < t1 && before.iter().zip(&grid).all(|(a, b)| a.len() == b.len()) {
+            // Clamped to the two states: never drawn before the step's start.
+            let w = ((time_s - t0) / (t1 - t0)).max(0.0) as f32;
+            for (now, then) in grid.iter_mut().zip(before) {
+                for (p, &q) in now.iter_mut().zip(then) {
+                    *p = q + w * (*p - q);
+                }
             }
         }
+        self.mesh_from_grid(&grid, out);
     }
 
     fn apply(&mut self, change: &ParameterChange) -> Result<(), SimError> {
@@ -1247,6 +1300,7 @@ impl DeformationModel for SurfaceModel {
             return Err(SimError::BadSnapshot("holds non-finite values".into()));
         }
         self.core = core.clone();
+        self.forget_drawn_before();
         self.work.start_valid = false;
         self.work.last_constraint_reject = None;
         self.work.broad.invalidate();
@@ -1276,6 +1330,7 @@ impl DeformationModel for SurfaceModel {
         // The contacts name points of the old grid.
         let free = self.core.free();
         self.core.contacts.clear(free);
+        self.forget_drawn_before();
         self.work.start_valid = false;
         self.work.broad.invalidate();
         self.work.checkpoint_x.clear();

@@ -1016,6 +1016,69 @@ fn advance_past_runs_the_step_controls_own_steps_through_the_slices() {
     assert!((free.time_s() - t).abs() < TIME_RESOLUTION_S);
 }
 
+/// A skin stepped past a frame's time is drawn at that time between the states before and
+/// after the step that passed it, clamped to them; a landed skin, and one just restored, is
+/// drawn as it is.
+#[test]
+fn the_skin_is_drawn_between_the_states_around_the_frames_time() {
+    let (mut m, motion) = model_and_motion("torso", 16);
+    let mut poses = MotionPoses(&motion);
+    let t0 = 0.2;
+    m.advance(t0, &mut poses, &mut Unlimited, None);
+    let mesh = |m: &SurfaceModel, at: Option<f64>| {
+        let mut out = SurfaceMesh::default();
+        match at {
+            Some(t) => m.surface_mesh_at_into(t, &mut out),
+            None => m.surface_mesh_into(&mut out),
+        }
+        out
+    };
+    // The largest distance between two meshes' vertices, metres (0 when bit for bit the same
+    // positions), and whether they share their triangles.
+    let apart = |a: &SurfaceMesh, b: &SurfaceMesh| {
+        assert_eq!(a.indices, b.indices);
+        (a.positions_m.iter().zip(&b.positions_m))
+            .map(|(p, q)| {
+                if p == q {
+                    0.0
+                } else {
+                    p.distance(*q).max(f32::MIN_POSITIVE)
+                }
+            })
+            .fold(0.0f32, f32::max)
+    };
+    // Landed: drawn as it is at its time.
+    assert_eq!(apart(&mesh(&m, Some(t0)), &mesh(&m, None)), 0.0);
+    let before = mesh(&m, None);
+    let snapshot = m.snapshot();
+    let r = m.advance_past(t0 + 1e-6, f64::INFINITY, &mut poses, &mut Unlimited, None);
+    assert_eq!(r.steps, 1, "{r:?}");
+    let t1 = m.time_s();
+    assert!(t1 > t0 + 1e-3, "a whole step, to {t1} s");
+    let after = mesh(&m, None);
+    let moved = apart(&before, &after);
+    assert!(moved > 1e-5, "the step moved the skin by {moved} m");
+    let halfway = mesh(&m, Some(0.5 * (t0 + t1)));
+    for ((a, b), h) in (before.positions_m.iter().zip(&after.positions_m)).zip(&halfway.positions_m)
+    {
+        assert!(h.distance((*a + *b) * 0.5) < 1e-6, "{a} {b} {h}");
+    }
+    assert!(halfway.normals.iter().all(|n| n.is_finite()));
+    assert_eq!(apart(&mesh(&m, Some(t0)), &before), 0.0, "the step's start");
+    assert_eq!(apart(&mesh(&m, Some(t0 - 1.0)), &before), 0.0, "clamped");
+    assert_eq!(apart(&mesh(&m, Some(t1)), &after), 0.0);
+    assert_eq!(apart(&mesh(&m, Some(t1 + 1.0)), &after), 0.0, "clamped");
+    // A restored state does not follow from the step before it: drawn as it is, at any time
+    // after the step kept above.
+    let mut other = m.clone();
+    other.restore(&snapshot).expect("its own snapshot");
+    other.advance(t0 + 0.1, &mut poses, &mut Unlimited, None);
+    m.restore(&other.snapshot())
+        .expect("a snapshot of the same model");
+    assert!(m.time_s() > t1);
+    assert_eq!(apart(&mesh(&m, Some(t1)), &mesh(&m, None)), 0.0);
+}
+
 /// Holding keeps the constraints' guarantee and the skin's motion: through 2 s of the torso's
 /// motion with and without holding, no fat point is left deeper than ε_c, holding spares most
 /// pushes and re-checks, and the skin stays no farther from where the paper's projection alone
