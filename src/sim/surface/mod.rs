@@ -88,6 +88,11 @@ struct Core {
     /// Whether muscles hold the skin resting on them between steps ([`ContactState::hold`]);
     /// off, contact is the paper's positional projection alone.
     hold_contacts: bool,
+    /// The fixed rows in the world at `t_s` (row 0 then row N−1, SoA, 2M each), from the last
+    /// committed step or resampled with the grid; empty before the first step. The skin is
+    /// drawn with them when the step's start is not known (after a restore or a resolution
+    /// change, until the next step), where the neutral posture's would snap its ends there.
+    rings_world: [Vec<f32>; 3],
 }
 
 /// Scratch and caches (not part of a snapshot).
@@ -109,6 +114,8 @@ struct Work {
     checkpoint_v: Vec<f32>,
     checkpoint_t_s: f64,
     checkpoint_step_s: f64,
+    /// `Core::rings_world` at the checkpoint.
+    checkpoint_rings: [Vec<f32>; 3],
     touched: Vec<u32>,
     recheck: Vec<u32>,
     /// Scratch of [`AnchorTable::place`].
@@ -389,6 +396,8 @@ impl SurfaceModel {
     fn current_grid_into(&self, grid: &mut [Vec<f32>; 3]) {
         let rings = if self.work.start_valid {
             self.work.kin.rings_start.clone()
+        } else if self.core.rings_world[0].len() == 2 * self.core.around {
+            self.core.rings_world.clone()
         } else {
             // Fixed rows at the neutral posture.
             let skin_rings = self.core.neutral_rings();
@@ -502,6 +511,14 @@ impl SurfaceModel {
         self.work.checkpoint_v.clone_from(&self.core.v);
         self.work.checkpoint_t_s = self.core.t_s;
         self.work.checkpoint_step_s = self.core.step_s;
+        for (kept, now) in self
+            .work
+            .checkpoint_rings
+            .iter_mut()
+            .zip(&self.core.rings_world)
+        {
+            kept.clone_from(now);
+        }
         self.work
             .checkpoint_contacts
             .clone_from(&self.core.contacts);
@@ -654,8 +671,17 @@ impl SurfaceModel {
             self.core
                 .contacts
                 .clone_from(&self.work.checkpoint_contacts);
+            for (now, kept) in self
+                .core
+                .rings_world
+                .iter_mut()
+                .zip(&self.work.checkpoint_rings)
+            {
+                now.clone_from(kept);
+            }
         } else {
             // No checkpoint at this resolution: back to rest at the neutral posture.
+            self.core.rings_world = Default::default();
             let rest = Core::rest_state(&self.core);
             self.core.x = rest;
             self.core.v.iter_mut().for_each(|v| *v = 0.0);
@@ -789,6 +815,9 @@ impl SurfaceModel {
         std::mem::swap(&mut w.kin.rings_start, &mut w.kin.rings_end);
         std::mem::swap(&mut w.kin.anchors_start, &mut w.kin.anchors_end);
         std::mem::swap(&mut core.contacts, &mut w.candidate_contacts);
+        for (now, start) in core.rings_world.iter_mut().zip(&w.kin.rings_start) {
+            now.clone_from(start);
+        }
         w.start_valid = true;
     }
 }
@@ -928,6 +957,7 @@ impl Core {
             recheck_fraction: d.recheck_fraction,
             contacts: ContactState::default(),
             hold_contacts: d.hold_contacts,
+            rings_world: Default::default(),
             character,
         })
     }
@@ -1323,6 +1353,8 @@ impl DeformationModel for SurfaceModel {
         }
         let current_rings = if self.work.start_valid {
             Some(self.work.kin.rings_start.clone())
+        } else if self.core.rings_world[0].len() == 2 * self.core.around {
+            Some(self.core.rings_world.clone())
         } else {
             None
         };

@@ -52,6 +52,7 @@ pub(super) fn resample(
     rings: Option<[Vec<f32>; 3]>,
 ) -> Core {
     let (m, n) = (core.around, core.along);
+    let rings_known = rings.is_some();
     let rings = rings.unwrap_or_else(|| {
         let r = core.neutral_rings();
         [
@@ -94,9 +95,13 @@ pub(super) fn resample(
     let area_ratio = (m * (n - 1)) as f32 / (new_m * (new_n - 1)) as f32;
     let mut x = vec![0.0f32; 3 * free_new];
     let mut v = vec![0.0f32; 3 * free_new];
+    let mut rings_world: [Vec<f32>; 3] = Default::default();
     for c in 0..3 {
         let g = full(&grid[c]);
         x[c * free_new..(c + 1) * free_new].copy_from_slice(&g[new_m..new_m + free_new]);
+        // The fixed rows as resampled with the grid: what it is drawn with until the next step.
+        rings_world[c].extend_from_slice(&g[..new_m]);
+        rings_world[c].extend_from_slice(&g[new_m + free_new..]);
         let vc = free_of(&core.v[c * free_old..(c + 1) * free_old], 1.0);
         v[c * free_new..(c + 1) * free_new].copy_from_slice(&vc);
     }
@@ -105,6 +110,11 @@ pub(super) fn resample(
     out.along = new_n;
     out.x = x;
     out.v = v;
+    out.rings_world = if rings_known {
+        rings_world
+    } else {
+        Default::default()
+    };
     let mat = &core.materials;
     let three = |f: &[Vec<f32>; 3]| [full(&f[0]), full(&f[1]), full(&f[2])];
     out.materials.eta = three(&mat.eta);

@@ -1079,6 +1079,49 @@ fn the_skin_is_drawn_between_the_states_around_the_frames_time() {
     assert_eq!(apart(&mesh(&m, Some(t1)), &mesh(&m, None)), 0.0);
 }
 
+/// Between a restore or a resolution change and the next step (a paused simulation), the skin
+/// is drawn with its fixed rows where the skeleton had them at the state's time, not snapped to
+/// the neutral posture's.
+#[test]
+fn a_restored_or_resampled_skin_keeps_its_ends_where_the_skeleton_had_them() {
+    let (mut m, motion) = model_and_motion("torso", 16);
+    let neutral = m.clone();
+    let mut poses = MotionPoses(&motion);
+    m.advance(1.0, &mut poses, &mut Unlimited, None);
+    let rows = |m: &SurfaceModel| -> (Vec<Vec3>, Vec<Vec3>) {
+        let mut mesh = SurfaceMesh::default();
+        m.surface_mesh_into(&mut mesh);
+        let (around, along) = m.resolution();
+        let p = &mesh.positions_m;
+        let last = (around * (along - 1)) as usize;
+        (p[..around as usize].to_vec(), p[last..].to_vec())
+    };
+    let farthest = |a: &[Vec3], b: &[Vec3]| {
+        (a.iter().zip(b))
+            .map(|(p, q)| p.distance(*q))
+            .fold(0.0f32, f32::max)
+    };
+    let (bottom, top) = rows(&m);
+    let (neutral_bottom, neutral_top) = rows(&neutral);
+    let moved = farthest(&bottom, &neutral_bottom).max(farthest(&top, &neutral_top));
+    assert!(moved > 0.01, "the posture at 1 s moves an end by {moved} m");
+    m.restore(&m.snapshot()).expect("its own snapshot");
+    assert_eq!(rows(&m), (bottom.clone(), top.clone()), "after a restore");
+    m.set_resolution(32, 32).expect("a valid resolution");
+    let (fine_bottom, fine_top) = rows(&m);
+    // Every other point of a ring twice as fine sits on an old one.
+    let even = |ring: &[Vec3]| ring.iter().step_by(2).copied().collect::<Vec<_>>();
+    assert!(farthest(&even(&fine_bottom), &bottom) < 1e-6);
+    assert!(farthest(&even(&fine_top), &top) < 1e-6);
+    // And a snapshot keeps them: restored into another model of the same character.
+    let mut other = neutral.clone();
+    other.set_resolution(32, 32).expect("a valid resolution");
+    other
+        .restore(&m.snapshot())
+        .expect("same character and resolution");
+    assert_eq!(rows(&other), (fine_bottom, fine_top));
+}
+
 /// Holding keeps the constraints' guarantee and the skin's motion: through 2 s of the torso's
 /// motion with and without holding, no fat point is left deeper than ε_c, holding spares most
 /// pushes and re-checks, and the skin stays no farther from where the paper's projection alone
