@@ -432,18 +432,12 @@ impl AppState {
     }
 
     /// The skin as it is drawn at `time_s`: interpolated back to it when the simulation has
-    /// stepped past it (see [`DeformationModel::surface_mesh_at_into`]).
+    /// stepped past it (see [`DeformationModel::surface_mesh_at_into`]); the character's own
+    /// skin without a simulation.
     fn draw_surface_at(&mut self, time_s: f64) {
-        if let Some(model) = &self.model {
-            model.surface_mesh_at_into(time_s, &mut self.surface);
-            self.skin_grid = model.resolution();
-        }
-    }
-
-    fn refresh_surface(&mut self) {
         match &self.model {
             Some(model) => {
-                model.surface_mesh_into(&mut self.surface);
+                model.surface_mesh_at_into(time_s, &mut self.surface);
                 self.skin_grid = model.resolution();
             }
             None => {
@@ -453,6 +447,11 @@ impl AppState {
                 self.skin_grid = (self.character.skin.around, self.character.skin.along);
             }
         }
+    }
+
+    /// The skin as drawn at the time last shown (after a change of model or resolution).
+    fn refresh_surface(&mut self) {
+        self.draw_surface_at(self.shown_time_s);
     }
 
     fn pose_in_physical(&self, snapshot: &HubSnapshot, sample: &RoleSample) -> Option<Pose> {

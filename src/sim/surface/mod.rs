@@ -140,11 +140,12 @@ struct Work {
     first_mask: Vec<u8>,
     first_normal: [Vec<f32>; 3],
     /// The whole grid (fixed rings included, SoA) before the last accepted step of the last
-    /// `advance` call, the one that reached its target, and its time (NaN when there is none:
-    /// at the start, after a restore or a resolution change). The skin is drawn interpolated
-    /// between it and the current state ([`DeformationModel::surface_mesh_at_into`]).
+    /// `advance` call, the one that reached its target, and its time (`None` when there is
+    /// none: at the start, after a restore, a resolution change or the guard's restore; the
+    /// grid's storage is kept for the next one). The skin is drawn interpolated between it and
+    /// the current state ([`DeformationModel::surface_mesh_at_into`]).
     drawn_before: [Vec<f32>; 3],
-    drawn_before_t_s: f64,
+    drawn_before_t_s: Option<f64>,
 }
 
 /// The elastic surface layer model of one character.
@@ -257,7 +258,6 @@ impl SurfaceModel {
         let mut work = Work::default();
         work.broad.margin_m = 0.02;
         let mut model = Self { core, work };
-        model.forget_drawn_before();
         model.save_checkpoint();
         Ok(model)
     }
@@ -392,23 +392,34 @@ impl SurfaceModel {
         grid
     }
 
+    /// The fixed rows in the world at the state's time, when known: the step's start, else
+    /// those kept with the state (`Core::rings_world`).
+    fn current_rings(&self) -> Option<&[Vec<f32>; 3]> {
+        if self.work.start_valid {
+            Some(&self.work.kin.rings_start)
+        } else if self.core.rings_world[0].len() == 2 * self.core.around {
+            Some(&self.core.rings_world)
+        } else {
+            None
+        }
+    }
+
     /// [`Self::current_grid`] into `grid`'s storage.
     fn current_grid_into(&self, grid: &mut [Vec<f32>; 3]) {
-        let rings = if self.work.start_valid {
-            self.work.kin.rings_start.clone()
-        } else if self.core.rings_world[0].len() == 2 * self.core.around {
-            self.core.rings_world.clone()
+        let neutral;
+        let rings = if let Some(rings) = self.current_rings() {
+            rings
         } else {
             // Fixed rows at the neutral posture.
-            let skin_rings = self.core.neutral_rings();
-            soa(skin_rings.into_iter())
+            neutral = soa(self.core.neutral_rings().into_iter());
+            &neutral
         };
         forces::assemble_grid(
             self.core.around,
             self.core.along,
             &self.core.x,
-            &rings,
-            &rings,
+            rings,
+            rings,
             0.0,
             grid,
         );
@@ -449,12 +460,12 @@ impl SurfaceModel {
         let mut before = std::mem::take(&mut self.work.drawn_before);
         self.current_grid_into(&mut before);
         self.work.drawn_before = before;
-        self.work.drawn_before_t_s = self.core.t_s;
+        self.work.drawn_before_t_s = Some(self.core.t_s);
     }
 
     /// Forgets the state before the last step (the current one no longer follows from it).
     fn forget_drawn_before(&mut self) {
-        self.work.drawn_before_t_s = f64::NAN;
+        self.work.drawn_before_t_s = None;
     }
 
     /// Skeleton-driven kinematics at time `t_s` into the "end" slots of the work area.
@@ -511,14 +522,10 @@ impl SurfaceModel {
         self.work.checkpoint_v.clone_from(&self.core.v);
         self.work.checkpoint_t_s = self.core.t_s;
         self.work.checkpoint_step_s = self.core.step_s;
-        for (kept, now) in self
-            .work
+        // An array's `clone_from` reuses each vector's storage.
+        self.work
             .checkpoint_rings
-            .iter_mut()
-            .zip(&self.core.rings_world)
-        {
-            kept.clone_from(now);
-        }
+            .clone_from(&self.core.rings_world);
         self.work
             .checkpoint_contacts
             .clone_from(&self.core.contacts);
@@ -671,14 +678,9 @@ impl SurfaceModel {
             self.core
                 .contacts
                 .clone_from(&self.work.checkpoint_contacts);
-            for (now, kept) in self
-                .core
+            self.core
                 .rings_world
-                .iter_mut()
-                .zip(&self.work.checkpoint_rings)
-            {
-                now.clone_from(kept);
-            }
+                .clone_from(&self.work.checkpoint_rings);
         } else {
             // No checkpoint at this resolution: back to rest at the neutral posture.
             self.core.rings_world = Default::default();
@@ -815,9 +817,7 @@ impl SurfaceModel {
         std::mem::swap(&mut w.kin.rings_start, &mut w.kin.rings_end);
         std::mem::swap(&mut w.kin.anchors_start, &mut w.kin.anchors_end);
         std::mem::swap(&mut core.contacts, &mut w.candidate_contacts);
-        for (now, start) in core.rings_world.iter_mut().zip(&w.kin.rings_start) {
-            now.clone_from(start);
-        }
+        core.rings_world.clone_from(&w.kin.rings_start);
         w.start_valid = true;
     }
 }
@@ -1147,11 +1147,7 @@ impl DeformationModel for SurfaceModel {
         let begin = clock.map(|c| c.now());
         // Steps are shortened only to land on the end; a target short of it is reached by the
         // first step that passes it. An end before the target (or NaN) is the target.
-        let end_time_s = if end_time_s >= target_time_s {
-            end_time_s
-        } else {
-            target_time_s
-        };
+        let end_time_s = end_time_s.max(target_time_s);
         let mut report = AdvanceReport::default();
         if !self.state_is_finite() {
             report.nonfinite_events += 1;
@@ -1283,9 +1279,14 @@ impl DeformationModel for SurfaceModel {
 
     fn surface_mesh_at_into(&self, time_s: f64, out: &mut SurfaceMesh) {
         let mut grid = self.current_grid();
-        let (t0, t1) = (self.work.drawn_before_t_s, self.core.t_s);
+        let t1 = self.core.t_s;
         let before = &self.work.drawn_before;
-        if t0 < t1 && time_s < t1 && before.iter().zip(&grid).all(|(a, b)| a.len() == b.len()) {
+        let same_grid = before.iter().zip(&grid).all(|(a, b)| a.len() == b.len());
+        if let Some(t0) = self.work.drawn_before_t_s
+            && t0 < t1
+            && time_s < t1
+            && same_grid
+        {
             // Clamped to the two states: never drawn before the step's start.
             let w = ((time_s - t0) / (t1 - t0)).max(0.0) as f32;
             for (now, then) in grid.iter_mut().zip(before) {
@@ -1351,13 +1352,7 @@ impl DeformationModel for SurfaceModel {
                 reason: "each side must be between 3 and 1024".into(),
             });
         }
-        let current_rings = if self.work.start_valid {
-            Some(self.work.kin.rings_start.clone())
-        } else if self.core.rings_world[0].len() == 2 * self.core.around {
-            Some(self.core.rings_world.clone())
-        } else {
-            None
-        };
+        let current_rings = self.current_rings().cloned();
         self.core = resample::resample(&self.core, around as usize, along as usize, current_rings);
         // The contacts name points of the old grid.
         let free = self.core.free();
