@@ -88,10 +88,11 @@ struct Core {
     /// Whether muscles hold the skin resting on them between steps ([`ContactState::hold`]);
     /// off, contact is the paper's positional projection alone.
     hold_contacts: bool,
-    /// The fixed rows in the world at `t_s` (row 0 then row N−1, SoA, 2M each), from the last
-    /// committed step or resampled with the grid; empty before the first step. The skin is
-    /// drawn with them when the step's start is not known (after a restore or a resolution
-    /// change, until the next step), where the neutral posture's would snap its ends there.
+    /// The fixed rows in the world at `t_s` (row 0 then row N−1, SoA, 2M each), as the skeleton
+    /// placed them at the step's start or the last committed step's end, or resampled with the
+    /// grid; empty until one of those. The skin is drawn with them when the step's start is not
+    /// known (after a restore or a resolution change, until the next step), where the neutral
+    /// posture's would snap its ends there.
     rings_world: [Vec<f32>; 3],
 }
 
@@ -501,6 +502,11 @@ impl SurfaceModel {
             &mut w.anchor_scratch,
         );
         w.start_valid = true;
+        // Once placed by the skeleton, these are the state's fixed rows: the skin is drawn with
+        // them from now on, so a snapshot must hold them (else a restore would draw the ends
+        // with the resampled or the neutral rows, and the restored skin would differ from the
+        // one snapshotted even when no step was taken since).
+        self.core.rings_world.clone_from(&w.kin.rings_start);
     }
 
     /// Copies the state, when it is finite, into the checkpoint the guard goes back to. Every

@@ -477,6 +477,43 @@ fn snapshot_and_restore_continue_identically() {
     assert_eq!(m.time_s(), first.2);
 }
 
+/// A snapshot holds the skin as drawn when it is taken, ends included, also when no step was
+/// taken since the skeleton placed the fixed rows (a stalled call, or one with no budget, after
+/// a resolution change): the fuzz test found a restore drawing the ends with rows placed
+/// another way, a rounding apart (stalled) or a resampling apart (no budget).
+#[test]
+fn a_snapshot_after_a_call_without_steps_restores_the_skin_as_drawn() {
+    let restored_matches = |m: &mut SurfaceModel, poses: &mut dyn PoseSource, budget: u64| {
+        let r = m.advance(m.time_s() + 0.01, poses, &mut MaxAttempts(budget), None);
+        assert_eq!(r.steps, 0, "{r:?}");
+        let (snapshot, drawn) = (m.snapshot(), m.positions_m());
+        m.advance(m.time_s() + 0.01, poses, &mut MaxAttempts(300), None);
+        m.restore(&snapshot).expect("the same model");
+        m.positions_m() == drawn
+    };
+    // Each model is resampled after a call has placed its fixed rows, so the resampled grid
+    // carries resampled rows, which the next call replaces by the skeleton's.
+    let resampled = |around, along| {
+        let mut m = model("wombat", 8, IntegratorKind::Verlet);
+        let mut poses = FixedPosture(Posture::neutral(&m.character().skeleton));
+        m.advance(0.01, &mut poses, &mut MaxAttempts(0), None);
+        m.set_resolution(around, along).expect("valid");
+        (m, poses)
+    };
+    // A call the guard stalls: no step is possible with these springs.
+    let (mut m, mut poses) = resampled(3, 3);
+    m.apply(&ParameterChange::TissueStiffness(Selection::All, 1e30))
+        .expect("a finite stiffness is taken");
+    assert!(restored_matches(&mut m, &mut poses, 300), "after a stall");
+    // A call with no budget (then steps are taken after the snapshot, so the restore has
+    // something to undo).
+    let (mut m, mut poses) = resampled(5, 7);
+    assert!(
+        restored_matches(&mut m, &mut poses, 0),
+        "after a call with no budget"
+    );
+}
+
 #[test]
 fn integrators_switch_at_run_time_and_all_follow_the_motion() {
     let (mut m, motion) = model_and_motion("arm", 16);
