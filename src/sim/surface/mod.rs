@@ -88,11 +88,11 @@ struct Core {
     /// Whether muscles hold the skin resting on them between steps ([`ContactState::hold`]);
     /// off, contact is the paper's positional projection alone.
     hold_contacts: bool,
-    /// The fixed rows in the world at `t_s` (row 0 then row N−1, SoA, 2M each), as the skeleton
-    /// placed them at the step's start or the last committed step's end, or resampled with the
-    /// grid; empty until one of those. The skin is drawn with them when the step's start is not
-    /// known (after a restore or a resolution change, until the next step), where the neutral
-    /// posture's would snap its ends there.
+    /// The fixed rows in the world at `t_s` (row 0 then row N−1, SoA, 2M each): the step's start
+    /// whenever the skeleton has placed it ([`start_placed`]), else as restored or resampled with
+    /// the grid; empty until one of those. The skin is drawn with them; only when they are empty
+    /// with the neutral posture's rows (which after a restore or a resolution change would snap
+    /// its ends there).
     rings_world: [Vec<f32>; 3],
 }
 
@@ -393,16 +393,11 @@ impl SurfaceModel {
         grid
     }
 
-    /// The fixed rows in the world at the state's time, when known: the step's start, else
-    /// those kept with the state (`Core::rings_world`).
+    /// The fixed rows in the world at the state's time, when known (`Core::rings_world`, which
+    /// holds the step's start whenever that is placed).
     fn current_rings(&self) -> Option<&[Vec<f32>; 3]> {
-        if self.work.start_valid {
-            Some(&self.work.kin.rings_start)
-        } else if self.core.rings_world[0].len() == 2 * self.core.around {
-            Some(&self.core.rings_world)
-        } else {
-            None
-        }
+        let rings = &self.core.rings_world;
+        (rings[0].len() == 2 * self.core.around).then_some(rings)
     }
 
     /// [`Self::current_grid`] into `grid`'s storage.
@@ -501,12 +496,7 @@ impl SurfaceModel {
             &mut w.kin.anchors_start,
             &mut w.anchor_scratch,
         );
-        w.start_valid = true;
-        // Once placed by the skeleton, these are the state's fixed rows: the skin is drawn with
-        // them from now on, so a snapshot must hold them (else a restore would draw the ends
-        // with the resampled or the neutral rows, and the restored skin would differ from the
-        // one snapshotted even when no step was taken since).
-        self.core.rings_world.clone_from(&w.kin.rings_start);
+        start_placed(&mut self.core, w);
     }
 
     /// Copies the state, when it is finite, into the checkpoint the guard goes back to. Every
@@ -823,9 +813,17 @@ impl SurfaceModel {
         std::mem::swap(&mut w.kin.rings_start, &mut w.kin.rings_end);
         std::mem::swap(&mut w.kin.anchors_start, &mut w.kin.anchors_end);
         std::mem::swap(&mut core.contacts, &mut w.candidate_contacts);
-        core.rings_world.clone_from(&w.kin.rings_start);
-        w.start_valid = true;
+        start_placed(core, w);
     }
+}
+
+/// Marks the step's start in `w` (shapes, fixed rows, anchors) as placed by the skeleton at the
+/// state's time, and keeps its fixed rows with the state: they are what the skin is drawn with
+/// from now on, so a snapshot must hold them (else a restore after a call that took no step
+/// would draw the ends with the resampled or the neutral rows instead).
+fn start_placed(core: &mut Core, w: &mut Work) {
+    core.rings_world.clone_from(&w.kin.rings_start);
+    w.start_valid = true;
 }
 
 enum Attempt {
