@@ -14,6 +14,8 @@ pub mod decimal;
 pub mod devices;
 pub mod files;
 pub mod pose;
+#[cfg(test)]
+mod proptest_cases;
 pub mod render;
 pub mod sim;
 pub mod stereo;

@@ -38,7 +38,7 @@ fn no_non_finite(events: &[DeviceEvent]) -> bool {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig::with_cases(crate::proptest_cases::cases_or(256)))]
 
     #[test]
     fn arbitrary_bytes_never_panic_and_stay_accounted(

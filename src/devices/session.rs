@@ -635,7 +635,7 @@ mod tests {
     fn arbitrary_bytes_never_panic() {
         use proptest::prelude::*;
         let text = sample().to_text().into_bytes();
-        proptest!(ProptestConfig::with_cases(300), |(pos in 0usize..400, byte in any::<u8>(), junk in proptest::collection::vec(any::<u8>(), 0..64))| {
+        proptest!(ProptestConfig::with_cases(crate::proptest_cases::cases_or(300)), |(pos in 0usize..400, byte in any::<u8>(), junk in proptest::collection::vec(any::<u8>(), 0..64))| {
             let mut b = text.clone();
             let i = pos % b.len();
             b[i] = byte;
