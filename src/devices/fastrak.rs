@@ -25,7 +25,10 @@
 //! `'S'`), waits for the whole record and checks every item: spaces are spaces, CR LF is CR LF,
 //! ASCII fields are numbers, binary values are finite and plausible (|position| ≤ 1000 units,
 //! |angle| ≤ 360.5°, quaternion length within 5% of 1). A record that fails loses its first byte
-//! and the scan goes on; everything skipped is reported as [`DeviceEvent::Dropped`].
+//! and the scan goes on; everything skipped is reported as [`DeviceEvent::Dropped`]. A status
+//! header is given up as soon as a byte that cannot be in a status record arrives (its body is
+//! printable up to its CR LF), not after 55 bytes: with a short output list a false one in
+//! garbage would otherwise hold back several data records.
 //!
 //! # Units and axes
 //! Positions are inches (default) or centimetres ([`LengthUnit`]), converted to metres. The
@@ -285,6 +288,23 @@ fn header_at(bytes: &[u8]) -> Header {
     }
 }
 
+/// Whether `bytes` (a status header and what has arrived after it, any length) can still be the
+/// start of a status record: its body is printable ASCII or spaces up to the closing CR LF at
+/// bytes 54-55. A byte that breaks this rejects a false header at once, so the records behind
+/// it are not held back until 55 bytes have arrived (short output lists fit several records in
+/// that).
+fn status_so_far(bytes: &[u8]) -> bool {
+    let body = STATUS_RECORD_LEN - 2;
+    let printable = |b: &u8| b.is_ascii_graphic() || *b == b' ';
+    bytes.iter().take(body).all(printable)
+        && bytes
+            .iter()
+            .skip(body)
+            .take(2)
+            .zip(b"\r\n")
+            .all(|(b, want)| b == want)
+}
+
 /// Parses one fixed-width ASCII number field (sign `-`, `+` or space, digits, one point).
 fn ascii_number(field: &[u8]) -> Option<f64> {
     if !field
@@ -436,11 +456,8 @@ impl FastrakDecoder {
     }
 
     fn parse_status(rec: &[u8]) -> Option<StatusEvent> {
-        (rec.len() == STATUS_RECORD_LEN && rec.ends_with(b"\r\n")).then_some(())?;
+        (rec.len() == STATUS_RECORD_LEN && status_so_far(rec)).then_some(())?;
         let body = &rec[..STATUS_RECORD_LEN - 2];
-        body.iter()
-            .all(|b| b.is_ascii_graphic() || *b == b' ')
-            .then_some(())?;
         Some(StatusEvent::Report {
             text: format!(
                 "FASTRAK status station {}: {}",
@@ -479,10 +496,11 @@ impl Decoder for FastrakDecoder {
                     }
                 }
                 Header::Status => {
-                    if rest.len() < STATUS_RECORD_LEN {
+                    // Wait for the whole record while what has come can still be one.
+                    if rest.len() < STATUS_RECORD_LEN && status_so_far(rest) {
                         break;
                     }
-                    match Self::parse_status(&rest[..STATUS_RECORD_LEN]) {
+                    match rest.get(..STATUS_RECORD_LEN).and_then(Self::parse_status) {
                         Some(status) => {
                             self.drops.push(DeviceEvent::Status(status), out);
                             pos += STATUS_RECORD_LEN;
@@ -736,6 +754,43 @@ mod tests {
         );
         assert_eq!(poses(&events).len(), 1);
         assert_eq!(events[0], DeviceEvent::Dropped { bytes: 30 });
+    }
+
+    #[test]
+    fn a_false_status_header_does_not_hold_back_the_records_after_it() {
+        // A short output list (space, CR LF) makes 6-byte records: three fit in less than a
+        // status record's 55 bytes, which a status-like header in the garbage waited for.
+        let s = FastrakSettings {
+            items: vec![0, 1],
+            ..FastrakSettings::default()
+        };
+        let one = encode_record(FastrakFormat::Ascii, &s, &record(4, [0.0; 3], [0.0; 3]));
+        assert_eq!(one.len(), 6);
+        let mut stream = b"21S".to_vec();
+        for _ in 0..3 {
+            stream.extend(&one);
+        }
+        let mut dec = FastrakDecoder::new(FastrakFormat::Ascii, s.clone()).expect("valid settings");
+        let events = feed_all(&mut dec, &stream);
+        assert_eq!(poses(&events).len(), 3, "{events:?}");
+        assert_eq!(events[0], DeviceEvent::Dropped { bytes: 3 });
+        assert_eq!(dec.pending(), 0);
+        // The same events whatever the split.
+        for k in 0..=stream.len() {
+            let mut dec = FastrakDecoder::new(FastrakFormat::Ascii, s.clone()).expect("valid");
+            let mut out = Vec::new();
+            dec.feed(&stream[..k], &mut out);
+            dec.feed(&stream[k..], &mut out);
+            assert_eq!(out, events, "split at {k}");
+        }
+        // A real status record still waits for its last byte.
+        let status = encode_status_record(2, "ok");
+        let mut dec = FastrakDecoder::with_defaults(FastrakFormat::Ascii);
+        let mut out = Vec::new();
+        dec.feed(&status[..STATUS_RECORD_LEN - 1], &mut out);
+        assert!(out.is_empty(), "{out:?}");
+        dec.feed(&status[STATUS_RECORD_LEN - 1..], &mut out);
+        assert!(matches!(out[..], [DeviceEvent::Status(_)]), "{out:?}");
     }
 
     #[test]
