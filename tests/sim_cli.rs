@@ -226,8 +226,16 @@ fn simulate_bad_arguments_say_what_is_wrong() {
         (
             // Within the time resolution: nothing would be simulated.
             vec!["simulate", "arm_16", "--seconds", "1e-9"],
-            "--seconds 0.000000001: must be a number of seconds longer than the simulation's \
-             time resolution (0.000000001 s)",
+            "--seconds 0.000000001: must be a finite number of seconds longer than the \
+             simulation's time resolution (0.000000001 s)",
+        ),
+        (
+            vec!["simulate", "arm_16", "--seconds", "-1"],
+            "--seconds -1: must be a finite number of seconds",
+        ),
+        (
+            vec!["simulate", "arm_16", "--seconds", "inf"],
+            "--seconds inf: must be a finite number of seconds",
         ),
         (vec!["simulate", "arm_16", "--repeat", "0"], "--repeat"),
         (

@@ -32,7 +32,8 @@ pub struct Args {
     pub motion: Option<String>,
     /// Simulated seconds (default: one pass of the motion from t = 0, at least 2 s: to its last
     /// key, or one period of a looping motion).
-    #[arg(long)]
+    // A negative value is a value, which `run` refuses by name, not an unknown flag.
+    #[arg(long, allow_negative_numbers = true)]
     pub seconds: Option<f64>,
     /// Integrator: euler, verlet, rk2 or rk4.
     #[arg(long, default_value = "verlet")]
@@ -290,8 +291,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let seconds = match args.seconds {
         Some(s) if s.is_finite() && s > TIME_RESOLUTION_S => s,
         Some(s) => bail!(
-            "--seconds {s}: must be a number of seconds longer than the simulation's time \
-             resolution ({TIME_RESOLUTION_S} s)"
+            "--seconds {s}: must be a finite number of seconds longer than the simulation's \
+             time resolution ({TIME_RESOLUTION_S} s)"
         ),
         None => motion.as_ref().map(|m| m.pass_s().max(2.0)).unwrap_or(2.0),
     };
