@@ -4,11 +4,8 @@
 
 pub mod damage;
 
-/// `PROPTEST_CASES` from the environment when set (for a deeper run than the suite's), else
-/// `default`: `ProptestConfig::with_cases` would otherwise ignore it.
-pub fn cases_or(default: u32) -> u32 {
-    std::env::var("PROPTEST_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
+// The library's own helper, compiled into each test crate (a `cfg(test)` item of the library is
+// not built for integration tests): one definition of how the suites read `PROPTEST_CASES`.
+#[path = "../../src/proptest_cases.rs"]
+mod proptest_cases;
+pub(crate) use proptest_cases::cases_or;
