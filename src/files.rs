@@ -1,5 +1,5 @@
 //! Atomic file writing: write a temporary file beside the target, flush it, then rename it over
-//! the target, so a crash never leaves a half-written file.
+//! the target (and sync the folder), so a crash never leaves a half-written file.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -15,7 +15,8 @@ pub struct WriteError {
     pub source: std::io::Error,
 }
 
-/// Writes `bytes` to `path` atomically (temporary file in the same folder, fsync, rename).
+/// Writes `bytes` to `path` atomically (temporary file in the same folder, fsync, rename, then
+/// [`sync_dir`] on the folder).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     let wrap = |source| WriteError {
         path: path.to_path_buf(),
@@ -41,7 +42,23 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp_path);
     }
-    result.map_err(wrap)
+    result.map_err(wrap)?;
+    sync_dir(&dir);
+    Ok(())
+}
+
+/// Asks for a rename into `dir` to reach the disk: on Unix a folder's entries are made durable
+/// by syncing the folder itself, so without this a crash soon after a save could bring back the
+/// old file. Best effort: the file is already in place and whole, and some file systems refuse
+/// to sync a folder, so a failure here is not reported. Does nothing where a folder cannot be
+/// opened as a file.
+pub fn sync_dir(dir: &Path) {
+    #[cfg(unix)]
+    if let Ok(folder) = std::fs::File::open(dir) {
+        let _ = folder.sync_all();
+    }
+    #[cfg(not(unix))]
+    let _ = dir;
 }
 
 #[cfg(test)]

@@ -508,7 +508,8 @@ impl SessionWriter {
         self.count
     }
 
-    /// Writes the `end` line, syncs and renames the file into place; returns the target path.
+    /// Writes the `end` line, syncs and renames the file into place, then syncs the folder
+    /// ([`crate::files::sync_dir`]); returns the target path.
     pub fn finish(mut self) -> Result<PathBuf, SessionError> {
         let partial = self.partial.clone();
         let io = |source| SessionError::Io {
@@ -523,6 +524,9 @@ impl SessionWriter {
             path: self.target.clone(),
             source,
         })?;
+        if let Some(dir) = self.partial.parent() {
+            crate::files::sync_dir(dir);
+        }
         Ok(self.target)
     }
 }
