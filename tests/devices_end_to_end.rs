@@ -569,6 +569,75 @@ fn record_command_writes_a_session_of_live_udp_datagrams() {
 }
 
 #[test]
+fn record_recover_keeps_the_whole_records_of_a_cut_short_recording() {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/sessions/spaceball.session");
+    let whole = Session::load(&sample).expect("sample session");
+    let text = std::fs::read(&sample).expect("read sample");
+    // Cut inside a record line, as a killed recording's buffered writes leave it.
+    let cut = text.len() * 3 / 4;
+    assert_ne!(text[cut - 1], b'\n', "the cut falls inside a line");
+    let whole_lines = text[..cut].iter().filter(|&&b| b == b'\n').count();
+    let kept = whole_lines - 2;
+    let last_line_start = text[..cut]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .expect("a line end")
+        + 1;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let partial = dir.path().join(".rec.session.partial");
+    std::fs::write(&partial, &text[..cut]).expect("write the cut file");
+    let out_path = dir.path().join("rec.session");
+
+    // The strict reader refuses it and points at the recovery.
+    let refused = leman()
+        .args(["decode"])
+        .arg(&partial)
+        .output()
+        .expect("run decode");
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("truncated") && err.contains("--recover"),
+        "{err}"
+    );
+
+    let run = leman()
+        .args(["record", "--recover"])
+        .arg(&partial)
+        .arg("--out")
+        .arg(&out_path)
+        .output()
+        .expect("run record --recover");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains(&format!("kept {kept} records")), "{stdout}");
+    assert!(
+        stdout.contains(&format!("dropped {} bytes", cut - last_line_start)),
+        "{stdout}"
+    );
+    let recovered = Session::load(&out_path).expect("the recovered session loads strictly");
+    assert_eq!(recovered.header, whole.header);
+    assert_eq!(recovered.records, whole.records[..kept]);
+
+    // The file recovered from is never overwritten.
+    let same = leman()
+        .args(["record", "--recover"])
+        .arg(&partial)
+        .arg("--out")
+        .arg(&partial)
+        .output()
+        .expect("run record --recover onto itself");
+    assert!(!same.status.success());
+    let err = String::from_utf8_lossy(&same.stderr);
+    assert!(err.contains("name a new file"), "{err}");
+    assert_eq!(std::fs::read(&partial).expect("reread"), &text[..cut]);
+}
+
+#[test]
 fn record_command_names_the_profile_file_and_field_on_errors() {
     let dir = tempfile::tempdir().expect("tempdir");
     let bad = dir.path().join("bad.toml");

@@ -4,7 +4,8 @@ use anyhow::Context as _;
 use leman::clock::RealClock;
 use leman::devices::hub::{DeviceState, Hub, HubOptions};
 use leman::devices::profile::Profile;
-use std::path::PathBuf;
+use leman::devices::session::Session;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -24,10 +25,22 @@ pub struct Args {
     /// Print each device's state and rate every this many seconds (0 = never).
     #[arg(long, default_value_t = 1.0)]
     pub status_every: f64,
+    /// Instead of recording: read a recording that was cut short (the `.NAME.partial` file a
+    /// killed `leman record` leaves) or damaged, and write its header and every record before
+    /// the first fault to `--out` as a whole session. The file read is left as it is.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["profile", "seconds"])]
+    pub recover: Option<PathBuf>,
 }
 
 /// Runs `leman record`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(from) = &args.recover {
+        let out = args
+            .out
+            .as_deref()
+            .context("--out SESSION is required: where to write what --recover keeps")?;
+        return recover(from, out);
+    }
     let profile_path = args
         .profile
         .context("--profile FILE is required (see devices/*.toml)")?;
@@ -84,6 +97,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let chunks: u64 = snap.devices.iter().map(|d| d.chunks).sum();
     if let Some(path) = path {
         eprintln!("wrote {} ({} chunks)", path.display(), chunks);
+    }
+    Ok(())
+}
+
+/// `leman record --recover FROM --out OUT`: writes what can be read of `FROM` to `OUT`.
+fn recover(from: &Path, out: &Path) -> anyhow::Result<()> {
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same(from, out) {
+        anyhow::bail!(
+            "--out {} is the file being recovered: name a new file, so that the damaged \
+             recording stays as it is",
+            out.display()
+        );
+    }
+    let bytes = std::fs::read(from).with_context(|| format!("cannot read {}", from.display()))?;
+    let recovered = Session::recover(&bytes, from)?;
+    recovered.session.save(out)?;
+    let session = &recovered.session;
+    println!(
+        "kept {} records ({:.3} s of devices) of {} in {}",
+        session.records.len(),
+        session.duration().as_secs_f64(),
+        from.display(),
+        out.display()
+    );
+    match recovered.dropped {
+        None => println!("the file was whole: nothing dropped"),
+        Some(d) if d.bytes == 0 => println!("nothing dropped, but {}", d.reason),
+        Some(d) => println!("dropped {} bytes: {}", d.bytes, d.reason),
     }
     Ok(())
 }

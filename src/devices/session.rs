@@ -255,158 +255,61 @@ impl Session {
 
     /// Parses session bytes; `path` names the file in errors. Never panics.
     pub fn parse(bytes: &[u8], path: &Path) -> Result<Self, SessionError> {
-        let mut offset = 0usize;
-        let mut line_no = 0usize;
-        let mut header: Option<SessionHeader> = None;
-        let mut records = Vec::new();
-        let mut last_at = Duration::ZERO;
-        let mut ended = false;
-        while offset < bytes.len() {
-            line_no += 1;
-            let start = offset;
-            let corrupt = |message: String| SessionError::Corrupt {
-                path: path.to_path_buf(),
-                line: line_no,
-                offset: start,
-                message,
-            };
-            let rest = &bytes[start..];
-            let Some(nl) = rest.iter().position(|&b| b == b'\n') else {
-                return Err(corrupt(format!(
-                    "truncated: the last line has no end ({} bytes)",
-                    rest.len()
-                )));
-            };
-            offset = start + nl + 1;
-            let line = std::str::from_utf8(&rest[..nl])
-                .map_err(|e| corrupt(format!("not UTF-8 text ({e})")))?;
-            if ended {
-                return Err(corrupt("data after the `end` line".into()));
-            }
-            if line_no == 1 {
-                let version = line
-                    .strip_prefix(MAGIC)
-                    .and_then(|v| v.trim().parse::<u32>().ok())
-                    .ok_or_else(|| {
-                        corrupt(format!("not a leman session (expected `{MAGIC} N`)"))
-                    })?;
-                if version != SESSION_VERSION {
-                    return Err(corrupt(format!(
-                        "session format version {version} is not supported (this build reads \
-                         {SESSION_VERSION})"
-                    )));
-                }
-                continue;
-            }
-            if line_no == 2 {
-                let json = line
-                    .strip_prefix("header ")
-                    .ok_or_else(|| corrupt("expected the `header` line".into()))?;
-                let h: SessionHeader =
-                    serde_json::from_str(json).map_err(|e| corrupt(format!("bad header: {e}")))?;
-                h.profile
-                    .validate(path)
-                    .map_err(|e| corrupt(format!("bad profile in header: {e}")))?;
-                header = Some(h);
-                continue;
-            }
-            let devices = header.as_ref().map_or(0, |h| h.profile.devices.len());
-            let (tag, rest) = line.split_once(' ').unwrap_or((line, ""));
-            if tag == "end" {
-                let n: usize = rest
-                    .trim()
-                    .parse()
-                    .map_err(|_| corrupt(format!("bad record count {rest:?}")))?;
-                if n != records.len() {
-                    return Err(corrupt(format!(
-                        "the file says {n} records but holds {}: lines are missing or extra",
-                        records.len()
-                    )));
-                }
-                ended = true;
-                continue;
-            }
-            let mut fields = rest.splitn(3, ' ');
-            let at_ns: u64 = fields
-                .next()
-                .and_then(|t| t.parse().ok())
-                .ok_or_else(|| corrupt("bad or missing time".into()))?;
-            let at = Duration::from_nanos(at_ns);
-            if at < last_at {
-                return Err(corrupt(format!(
-                    "time goes backwards ({} ns after {} ns)",
-                    at_ns,
-                    last_at.as_nanos()
-                )));
-            }
-            last_at = at;
-            let mut device = || -> Result<usize, SessionError> {
-                let d: usize = fields
-                    .next()
-                    .and_then(|t| t.parse().ok())
-                    .ok_or_else(|| corrupt("bad or missing device index".into()))?;
-                if d >= devices {
-                    return Err(corrupt(format!(
-                        "device index {d} but the header has {devices} devices"
-                    )));
-                }
-                Ok(d)
-            };
-            let record = match tag {
-                "c" | "w" => {
-                    let device = device()?;
-                    let bytes = unhex(fields.next().unwrap_or("")).map_err(corrupt)?;
-                    if bytes.is_empty() {
-                        return Err(corrupt("empty chunk".into()));
-                    }
-                    if tag == "c" {
-                        Record::Chunk { at, device, bytes }
-                    } else {
-                        Record::Sent { at, device, bytes }
-                    }
-                }
-                "o" => Record::Opened {
-                    at,
-                    device: device()?,
-                },
-                "l" => {
-                    let device = device()?;
-                    let error: String = serde_json::from_str(fields.next().unwrap_or(""))
-                        .map_err(|e| corrupt(format!("bad lost reason: {e}")))?;
-                    Record::Lost { at, device, error }
-                }
-                "e" => {
-                    let json = [fields.next(), fields.next()]
-                        .into_iter()
-                        .flatten()
-                        .collect::<Vec<_>>()
-                        .join(" ");
-                    let event: DesktopEvent = serde_json::from_str(&json)
-                        .map_err(|e| corrupt(format!("bad desktop event: {e}")))?;
-                    Record::Desktop { at, event }
-                }
-                _ => return Err(corrupt(format!("unknown record type {tag:?}"))),
-            };
-            records.push(record);
-        }
-        let header = header.ok_or_else(|| SessionError::Corrupt {
-            path: path.to_path_buf(),
-            line: line_no.max(1),
-            offset: bytes.len(),
-            message: "truncated: no header".into(),
-        })?;
-        if !ended {
-            return Err(SessionError::Corrupt {
-                path: path.to_path_buf(),
-                line: line_no + 1,
-                offset: bytes.len(),
-                message: format!(
-                    "truncated: no `end` line after {} records (the recording was cut short)",
-                    records.len()
-                ),
+        let reading = read_lines(bytes, path);
+        if let Some(stop) = reading.stop {
+            // Cut inside its last line (no line end after the fault), as a killed recording's
+            // buffered writes leave a file: recoverable when the header was read.
+            let cut_short = !bytes[bytes.len() - stop.bytes..].contains(&b'\n');
+            return Err(if cut_short && reading.header.is_some() {
+                with_recovery_hint(stop.reason)
+            } else {
+                stop.reason
             });
         }
-        Ok(Session { header, records })
+        let header = reading
+            .header
+            .ok_or_else(|| no_header(bytes, path, reading.lines))?;
+        if !reading.ended {
+            let records = reading.records.len();
+            return Err(with_recovery_hint(no_end(
+                bytes,
+                path,
+                reading.lines,
+                records,
+            )));
+        }
+        Ok(Session {
+            header,
+            records: reading.records,
+        })
+    }
+
+    /// Reads what can be read of a cut-short or damaged session (a recording killed before it
+    /// stopped leaves its `.NAME.partial` file without an `end` line, often cut inside a line):
+    /// the header and every record up to the first line that is cut short, damaged or out of
+    /// place. Fails only when the header itself cannot be read. Never panics.
+    pub fn recover(bytes: &[u8], path: &Path) -> Result<Recovered, SessionError> {
+        let reading = read_lines(bytes, path);
+        let Some(header) = reading.header else {
+            return Err(reading
+                .stop
+                .map_or_else(|| no_header(bytes, path, reading.lines), |stop| stop.reason));
+        };
+        let dropped = match reading.stop {
+            Some(stop) => Some(stop),
+            None if !reading.ended => Some(Dropped {
+                reason: no_end(bytes, path, reading.lines, reading.records.len()),
+                bytes: 0,
+            }),
+            None => None,
+        };
+        Ok(Recovered {
+            session: Session {
+                header,
+                records: reading.records,
+            },
+            dropped,
+        })
     }
 
     /// The chunks of one device, in order.
@@ -425,6 +328,244 @@ impl Session {
     pub fn duration(&self) -> Duration {
         self.records.last().map_or(Duration::ZERO, Record::at)
     }
+}
+
+/// What [`Session::recover`] read of a session file.
+#[derive(Debug)]
+pub struct Recovered {
+    /// The header and the records read before the first fault.
+    pub session: Session,
+    /// Why reading stopped short of a whole file, if it did.
+    pub dropped: Option<Dropped>,
+}
+
+/// Where and why [`Session::recover`] stopped, and what it left unread.
+#[derive(Debug)]
+pub struct Dropped {
+    /// The fault: a cut-short or damaged line (its line number and byte offset), a wrong `end`
+    /// count, data after `end`, or a missing `end` line.
+    pub reason: SessionError,
+    /// Bytes left unread from the faulty line to the end of the file (0 when only the `end`
+    /// line is missing).
+    pub bytes: usize,
+}
+
+/// What [`read_lines`] read before the first fault.
+struct Reading {
+    header: Option<SessionHeader>,
+    records: Vec<Record>,
+    /// Whether a correct `end` line was read.
+    ended: bool,
+    /// Lines read, the faulty one included.
+    lines: usize,
+    /// The first fault, if any; nothing after it was read.
+    stop: Option<Dropped>,
+}
+
+/// `error` with a pointer to `leman record --recover`, for a file cut short after its header.
+fn with_recovery_hint(error: SessionError) -> SessionError {
+    match error {
+        SessionError::Corrupt {
+            path,
+            line,
+            offset,
+            message,
+        } => SessionError::Corrupt {
+            path,
+            line,
+            offset,
+            message: format!(
+                "{message}; `leman record --recover FILE --out NEW` keeps the records before it"
+            ),
+        },
+        io => io,
+    }
+}
+
+fn no_header(bytes: &[u8], path: &Path, lines: usize) -> SessionError {
+    SessionError::Corrupt {
+        path: path.to_path_buf(),
+        line: lines.max(1),
+        offset: bytes.len(),
+        message: "truncated: no header".into(),
+    }
+}
+
+fn no_end(bytes: &[u8], path: &Path, lines: usize, records: usize) -> SessionError {
+    SessionError::Corrupt {
+        path: path.to_path_buf(),
+        line: lines + 1,
+        offset: bytes.len(),
+        message: format!(
+            "truncated: no `end` line after {records} records (the recording was cut short)"
+        ),
+    }
+}
+
+/// Reads a session's lines in order up to the first fault; `path` names the file in errors.
+fn read_lines(bytes: &[u8], path: &Path) -> Reading {
+    let mut reading = Reading {
+        header: None,
+        records: Vec::new(),
+        ended: false,
+        lines: 0,
+        stop: None,
+    };
+    let mut offset = 0usize;
+    let mut last_at = Duration::ZERO;
+    while offset < bytes.len() {
+        reading.lines += 1;
+        let start = offset;
+        match read_line(bytes, path, &mut reading, &mut last_at, start) {
+            Ok(next) => offset = next,
+            Err(reason) => {
+                reading.stop = Some(Dropped {
+                    reason,
+                    bytes: bytes.len() - start,
+                });
+                break;
+            }
+        }
+    }
+    reading
+}
+
+/// Reads the line starting at byte `start` (line number `reading.lines`) into `reading`;
+/// returns the offset of the next line.
+fn read_line(
+    bytes: &[u8],
+    path: &Path,
+    reading: &mut Reading,
+    last_at: &mut Duration,
+    start: usize,
+) -> Result<usize, SessionError> {
+    let line_no = reading.lines;
+    let corrupt = |message: String| SessionError::Corrupt {
+        path: path.to_path_buf(),
+        line: line_no,
+        offset: start,
+        message,
+    };
+    let rest = &bytes[start..];
+    let Some(nl) = rest.iter().position(|&b| b == b'\n') else {
+        return Err(corrupt(format!(
+            "truncated: the last line has no end ({} bytes)",
+            rest.len()
+        )));
+    };
+    let next = start + nl + 1;
+    let line =
+        std::str::from_utf8(&rest[..nl]).map_err(|e| corrupt(format!("not UTF-8 text ({e})")))?;
+    if reading.ended {
+        return Err(corrupt("data after the `end` line".into()));
+    }
+    if line_no == 1 {
+        let version = line
+            .strip_prefix(MAGIC)
+            .and_then(|v| v.trim().parse::<u32>().ok())
+            .ok_or_else(|| corrupt(format!("not a leman session (expected `{MAGIC} N`)")))?;
+        if version != SESSION_VERSION {
+            return Err(corrupt(format!(
+                "session format version {version} is not supported (this build reads \
+                 {SESSION_VERSION})"
+            )));
+        }
+        return Ok(next);
+    }
+    if line_no == 2 {
+        let json = line
+            .strip_prefix("header ")
+            .ok_or_else(|| corrupt("expected the `header` line".into()))?;
+        let h: SessionHeader =
+            serde_json::from_str(json).map_err(|e| corrupt(format!("bad header: {e}")))?;
+        h.profile
+            .validate(path)
+            .map_err(|e| corrupt(format!("bad profile in header: {e}")))?;
+        reading.header = Some(h);
+        return Ok(next);
+    }
+    let devices = reading
+        .header
+        .as_ref()
+        .map_or(0, |h| h.profile.devices.len());
+    let (tag, rest) = line.split_once(' ').unwrap_or((line, ""));
+    if tag == "end" {
+        let n: usize = rest
+            .trim()
+            .parse()
+            .map_err(|_| corrupt(format!("bad record count {rest:?}")))?;
+        if n != reading.records.len() {
+            return Err(corrupt(format!(
+                "the file says {n} records but holds {}: lines are missing or extra",
+                reading.records.len()
+            )));
+        }
+        reading.ended = true;
+        return Ok(next);
+    }
+    let mut fields = rest.splitn(3, ' ');
+    let at_ns: u64 = fields
+        .next()
+        .and_then(|t| t.parse().ok())
+        .ok_or_else(|| corrupt("bad or missing time".into()))?;
+    let at = Duration::from_nanos(at_ns);
+    if at < *last_at {
+        return Err(corrupt(format!(
+            "time goes backwards ({} ns after {} ns)",
+            at_ns,
+            last_at.as_nanos()
+        )));
+    }
+    let mut device = || -> Result<usize, SessionError> {
+        let d: usize = fields
+            .next()
+            .and_then(|t| t.parse().ok())
+            .ok_or_else(|| corrupt("bad or missing device index".into()))?;
+        if d >= devices {
+            return Err(corrupt(format!(
+                "device index {d} but the header has {devices} devices"
+            )));
+        }
+        Ok(d)
+    };
+    let record = match tag {
+        "c" | "w" => {
+            let device = device()?;
+            let bytes = unhex(fields.next().unwrap_or("")).map_err(corrupt)?;
+            if bytes.is_empty() {
+                return Err(corrupt("empty chunk".into()));
+            }
+            if tag == "c" {
+                Record::Chunk { at, device, bytes }
+            } else {
+                Record::Sent { at, device, bytes }
+            }
+        }
+        "o" => Record::Opened {
+            at,
+            device: device()?,
+        },
+        "l" => {
+            let device = device()?;
+            let error: String = serde_json::from_str(fields.next().unwrap_or(""))
+                .map_err(|e| corrupt(format!("bad lost reason: {e}")))?;
+            Record::Lost { at, device, error }
+        }
+        "e" => {
+            let json = [fields.next(), fields.next()]
+                .into_iter()
+                .flatten()
+                .collect::<Vec<_>>()
+                .join(" ");
+            let event: DesktopEvent = serde_json::from_str(&json)
+                .map_err(|e| corrupt(format!("bad desktop event: {e}")))?;
+            Record::Desktop { at, event }
+        }
+        _ => return Err(corrupt(format!("unknown record type {tag:?}"))),
+    };
+    *last_at = at;
+    reading.records.push(record);
+    Ok(next)
 }
 
 /// Streams a session to `<dir>/.<name>.partial` while recording and renames it over the target on
@@ -597,6 +738,9 @@ mod tests {
             let msg = err.to_string();
             assert!(msg.contains("cut.session"), "{msg}");
             assert!(msg.contains("byte offset"), "{msg}");
+            // Past the header, the error points at the recovery.
+            let header_read = text[..cut].matches('\n').count() >= 2;
+            assert_eq!(msg.contains("--recover"), header_read, "cut {cut}: {msg}");
         }
     }
 
@@ -623,6 +767,10 @@ mod tests {
             assert!(err.contains("bad.session"), "{err}");
             assert!(err.contains(expect), "{err} lacks {expect}");
             assert!(err.contains("line "), "{err}");
+            assert!(
+                !err.contains("--recover"),
+                "a damaged file is not a cut one: {err}"
+            );
         }
         // The offset points at the start of the bad line.
         let bad = text.replacen("c 2500000", "c 25oo000", 1);
@@ -636,16 +784,97 @@ mod tests {
     }
 
     #[test]
-    fn arbitrary_bytes_never_panic() {
+    fn arbitrary_bytes_never_panic_and_recovery_keeps_whole_sessions() {
         use proptest::prelude::*;
         let text = sample().to_text().into_bytes();
         proptest!(ProptestConfig::with_cases(crate::proptest_cases::cases_or(300)), |(pos in 0usize..400, byte in any::<u8>(), junk in proptest::collection::vec(any::<u8>(), 0..64))| {
             let mut b = text.clone();
             let i = pos % b.len();
             b[i] = byte;
-            let _ = Session::parse(&b, Path::new("p"));
-            let _ = Session::parse(&junk, Path::new("p"));
+            for bytes in [&b, &junk] {
+                let strict = Session::parse(bytes, Path::new("p"));
+                let recovered = Session::recover(bytes, Path::new("p"));
+                if let Ok(s) = &strict {
+                    // A whole file is recovered whole.
+                    let r = recovered.as_ref().expect("a whole file recovers");
+                    prop_assert!(r.dropped.is_none());
+                    prop_assert_eq!(&r.session, s);
+                }
+                if let Ok(r) = recovered {
+                    // What recovery keeps is a whole session.
+                    let again = Session::parse(r.session.to_text().as_bytes(), Path::new("q"));
+                    prop_assert_eq!(again.expect("recovered reads back"), r.session);
+                }
+            }
         });
+    }
+
+    #[test]
+    fn recover_keeps_every_whole_record_of_any_cut() {
+        let whole = sample();
+        let text = whole.to_text();
+        let bytes = text.as_bytes();
+        let line_ends: Vec<usize> = (0..bytes.len()).filter(|&i| bytes[i] == b'\n').collect();
+        let header_end = line_ends[1] + 1;
+        for cut in 0..=bytes.len() {
+            let got = Session::recover(&bytes[..cut], Path::new("cut.session"));
+            if cut < header_end {
+                let msg = got.expect_err("no header, nothing to recover").to_string();
+                assert!(
+                    msg.contains("cut.session") && msg.contains("line "),
+                    "{msg}"
+                );
+                continue;
+            }
+            let got = got.expect("a whole header is enough");
+            // Whole lines in the cut, header and `end` not counted.
+            let whole_lines = line_ends.iter().filter(|&&e| e < cut).count();
+            let kept = (whole_lines - 2).min(whole.records.len());
+            assert_eq!(got.session.header, whole.header, "cut {cut}");
+            assert_eq!(got.session.records, whole.records[..kept], "cut {cut}");
+            let last_whole = line_ends[whole_lines - 1] + 1;
+            match got.dropped {
+                None => assert_eq!(cut, bytes.len(), "only the whole file has nothing dropped"),
+                Some(d) => {
+                    assert_eq!(d.bytes, cut - last_whole, "cut {cut}");
+                    let msg = d.reason.to_string();
+                    assert!(
+                        msg.contains("cut.session") && msg.contains("truncated"),
+                        "{msg}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn recover_stops_at_a_damaged_line_and_what_it_keeps_reads_back() {
+        let whole = sample();
+        let text = whole.to_text();
+        // Line 5 is the third record.
+        let bad = text.replacen("c 2500000 0 0001ff", "c 2500000 0 0001fg", 1);
+        let line5 = bad.find("c 2500000").expect("line 5");
+        let got = Session::recover(bad.as_bytes(), Path::new("bad.session")).expect("recover");
+        assert_eq!(got.session.records, whole.records[..2]);
+        let dropped = got.dropped.expect("a damaged line is reported");
+        assert_eq!(dropped.bytes, bad.len() - line5);
+        match &dropped.reason {
+            SessionError::Corrupt { line, offset, .. } => assert_eq!((*line, *offset), (5, line5)),
+            other => panic!("{other:?}"),
+        }
+        // What was kept is a whole session again.
+        let again = Session::parse(got.session.to_text().as_bytes(), Path::new("again"))
+            .expect("a recovered session reads strictly");
+        assert_eq!(again, got.session);
+        // A wrong `end` count keeps every record and says so; a whole file loses nothing.
+        let miscounted = text.replacen("end 5", "end 4", 1);
+        let got = Session::recover(miscounted.as_bytes(), Path::new("m")).expect("recover");
+        assert_eq!(got.session.records, whole.records);
+        let reason = got.dropped.expect("reported").reason.to_string();
+        assert!(reason.contains("lines are missing"), "{reason}");
+        let got = Session::recover(text.as_bytes(), Path::new("w")).expect("recover");
+        assert!(got.dropped.is_none());
+        assert_eq!(got.session, whole);
     }
 
     #[test]
