@@ -569,6 +569,88 @@ fn record_command_writes_a_session_of_live_udp_datagrams() {
 }
 
 #[test]
+fn a_killed_recording_is_recovered_up_to_its_last_flush() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let port = {
+        let probe = std::net::UdpSocket::bind("127.0.0.1:0").expect("probe");
+        probe.local_addr().expect("addr").port()
+    };
+    let profile_path = dir.path().join("ot.toml");
+    std::fs::write(
+        &profile_path,
+        opentrack_profile(&format!("127.0.0.1:{port}"))
+            .to_toml()
+            .expect("toml"),
+    )
+    .expect("write profile");
+    let out = dir.path().join("rec.session");
+    let mut child = leman()
+        .args(["record", "--profile"])
+        .arg(&profile_path)
+        .arg("--out")
+        .arg(&out)
+        .args(["--status-every", "0"])
+        .spawn()
+        .expect("spawn leman record");
+    // The recording has started (its clock too) when the partial file with its header exists.
+    let partial = dir.path().join(".rec.session.partial");
+    let waited = Instant::now();
+    while !std::fs::metadata(&partial).is_ok_and(|m| m.len() > 0) {
+        assert!(
+            waited.elapsed() < Duration::from_secs(20),
+            "no partial file"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let client = std::net::UdpSocket::bind("127.0.0.1:0").expect("client");
+    let start = Instant::now();
+    let mut sent = 0;
+    while start.elapsed() < Duration::from_millis(2500) {
+        let d = encode::opentrack::datagram([f64::from(sent), 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let _ = client.send_to(&d, ("127.0.0.1", port));
+        sent += 1;
+        // 20 a second: 50 datagrams are about 6 KiB of session lines, less than the writer's
+        // buffer holds, so only its flushes put them on disk before the kill.
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // SIGKILL: no Ctrl-C handler, no `end` line, no rename.
+    child.kill().expect("kill leman record");
+    child.wait().expect("wait");
+    assert!(!out.exists(), "a killed recording never appears whole");
+    let recovered = dir.path().join("recovered.session");
+    let run = leman()
+        .args(["record", "--recover"])
+        .arg(&partial)
+        .arg("--out")
+        .arg(&recovered)
+        .output()
+        .expect("run record --recover");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let session = Session::load(&recovered).expect("the recovered session loads strictly");
+    let chunks: Vec<_> = session.chunks(0).collect();
+    // The recorder flushes at each second of recording, so the datagrams of the first two
+    // seconds (about 40 of the 50 sent) are there whatever the kill interrupted.
+    assert!(
+        chunks.len() >= 10,
+        "{} of {sent} datagrams recovered",
+        chunks.len()
+    );
+    assert!(
+        chunks.iter().all(|(_, b)| b.len() == 48),
+        "one datagram per chunk"
+    );
+    let xs: Vec<f64> = chunks
+        .iter()
+        .map(|(_, b)| f64::from_le_bytes(b[..8].try_into().expect("8 bytes")))
+        .collect();
+    assert!(xs.windows(2).all(|w| w[1] > w[0]), "{xs:?}");
+}
+
+#[test]
 fn record_recover_keeps_the_whole_records_of_a_cut_short_recording() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/sessions/spaceball.session");
     let whole = Session::load(&sample).expect("sample session");

@@ -578,8 +578,15 @@ pub struct SessionWriter {
     target: PathBuf,
     count: usize,
     last_at: Duration,
+    /// Record time of the last flush to the operating system.
+    flushed_at: Duration,
     line: String,
 }
+
+/// How much recording time a [`SessionWriter`] may hold in its buffer: a recording killed
+/// before it stops loses at most the records of about this long (the records before it are in
+/// the `.partial` file for `leman record --recover`).
+pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 impl std::fmt::Debug for SessionWriter {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -610,7 +617,9 @@ impl SessionWriter {
         let partial = dir.join(partial_name);
         let file = std::fs::File::create(&partial).map_err(io)?;
         let mut file = std::io::BufWriter::new(file);
+        // The header goes out at once: without it nothing of a killed recording is recoverable.
         file.write_all(Session::header_text(header).as_bytes())
+            .and_then(|()| file.flush())
             .map_err(io)?;
         Ok(Self {
             file,
@@ -618,12 +627,14 @@ impl SessionWriter {
             target: target.to_path_buf(),
             count: 0,
             last_at: Duration::ZERO,
+            flushed_at: Duration::ZERO,
             line: String::new(),
         })
     }
 
     /// Appends one record. A record earlier than the previous one is stored at the previous
-    /// time (times in a session never decrease).
+    /// time (times in a session never decrease). The buffer goes to the file once a record is
+    /// [`FLUSH_EVERY`] or more (recording time) after the last flush.
     pub fn write(&mut self, record: &Record) -> Result<(), SessionError> {
         self.line.clear();
         if record.at() < self.last_at {
@@ -634,12 +645,17 @@ impl SessionWriter {
             self.last_at = record.at();
             record.write_line(&mut self.line);
         }
+        let due = self.last_at.saturating_sub(self.flushed_at) >= FLUSH_EVERY;
         self.file
             .write_all(self.line.as_bytes())
+            .and_then(|()| if due { self.file.flush() } else { Ok(()) })
             .map_err(|source| SessionError::Io {
                 path: self.partial.clone(),
                 source,
             })?;
+        if due {
+            self.flushed_at = self.last_at;
+        }
         self.count += 1;
         Ok(())
     }
@@ -875,6 +891,44 @@ mod tests {
         let got = Session::recover(text.as_bytes(), Path::new("w")).expect("recover");
         assert!(got.dropped.is_none());
         assert_eq!(got.session, whole);
+    }
+
+    #[test]
+    fn a_killed_recording_keeps_what_came_before_the_last_second() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("rec.session");
+        let header = SessionHeader::new(Profile::desktop_default());
+        let mut w = SessionWriter::create(&target, &header).expect("create");
+        let partial = dir.path().join(".rec.session.partial");
+        let on_disk = || {
+            let bytes = std::fs::read(&partial).expect("the partial file");
+            Session::recover(&bytes, &partial).expect("recoverable")
+        };
+        assert!(
+            on_disk().session.records.is_empty(),
+            "the header is out at once"
+        );
+        // A small record every 100 ms: far less than the buffer holds, so only the flushes
+        // put them on disk.
+        let at = |ms: u64| Record::Opened {
+            at: Duration::from_millis(ms),
+            device: 0,
+        };
+        for ms in (0..=2500).step_by(100) {
+            w.write(&at(ms)).expect("write");
+            let kept = on_disk().session.records.len() as u64;
+            // Flushed at each whole second of recording time: everything up to the last one is
+            // on disk, so every record more than FLUSH_EVERY old is.
+            let want = if ms < 1000 { 0 } else { ms / 1000 * 10 + 1 };
+            assert_eq!(kept, want, "at {ms} ms");
+            let older = if ms < 1000 { 0 } else { (ms - 1000) / 100 + 1 };
+            assert!(kept >= older, "at {ms} ms");
+        }
+        // Dropping the writer without finishing (an error path) leaves the partial file whole.
+        drop(w);
+        let left = on_disk();
+        assert_eq!(left.session.records.len(), 26);
+        assert!(!target.exists());
     }
 
     #[test]
