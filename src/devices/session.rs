@@ -358,6 +358,8 @@ struct Reading {
     ended: bool,
     /// Lines read, the faulty one included.
     lines: usize,
+    /// Time of the last record read (times never decrease).
+    last_at: Duration,
     /// The first fault, if any; nothing after it was read.
     stop: Option<Dropped>,
 }
@@ -409,14 +411,14 @@ fn read_lines(bytes: &[u8], path: &Path) -> Reading {
         records: Vec::new(),
         ended: false,
         lines: 0,
+        last_at: Duration::ZERO,
         stop: None,
     };
     let mut offset = 0usize;
-    let mut last_at = Duration::ZERO;
     while offset < bytes.len() {
         reading.lines += 1;
         let start = offset;
-        match read_line(bytes, path, &mut reading, &mut last_at, start) {
+        match read_line(bytes, path, &mut reading, start) {
             Ok(next) => offset = next,
             Err(reason) => {
                 reading.stop = Some(Dropped {
@@ -436,7 +438,6 @@ fn read_line(
     bytes: &[u8],
     path: &Path,
     reading: &mut Reading,
-    last_at: &mut Duration,
     start: usize,
 ) -> Result<usize, SessionError> {
     let line_no = reading.lines;
@@ -509,11 +510,11 @@ fn read_line(
         .and_then(|t| t.parse().ok())
         .ok_or_else(|| corrupt("bad or missing time".into()))?;
     let at = Duration::from_nanos(at_ns);
-    if at < *last_at {
+    if at < reading.last_at {
         return Err(corrupt(format!(
             "time goes backwards ({} ns after {} ns)",
             at_ns,
-            last_at.as_nanos()
+            reading.last_at.as_nanos()
         )));
     }
     let mut device = || -> Result<usize, SessionError> {
@@ -563,7 +564,7 @@ fn read_line(
         }
         _ => return Err(corrupt(format!("unknown record type {tag:?}"))),
     };
-    *last_at = at;
+    reading.last_at = at;
     reading.records.push(record);
     Ok(next)
 }
