@@ -571,8 +571,9 @@ fn read_line(
 
 /// Streams a session to `<dir>/.<name>.partial` while recording and renames it over the target on
 /// [`SessionWriter::finish`], so the target is either absent/old or complete. If the program dies
-/// first, the partial file stays for inspection (it has no `end` line, so loading it fails with
-/// a clear "truncated" error).
+/// first, the partial file stays: it has no `end` line, so loading it fails with a clear
+/// "truncated" error, and [`Session::recover`] (`leman record --recover`) keeps its records up
+/// to the writer's last flush (the header at once, then every [`FLUSH_EVERY`]).
 pub struct SessionWriter {
     file: std::io::BufWriter<std::fs::File>,
     partial: PathBuf,
