@@ -503,15 +503,15 @@ fn leman() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_leman"))
 }
 
-#[test]
-fn record_command_writes_a_session_of_live_udp_datagrams() {
-    let dir = tempfile::tempdir().expect("tempdir");
+/// `leman record` of an OpenTrack device on a free loopback port, into `dir/rec.session`, with
+/// `extra` arguments; returns the child, the port and the session's path.
+fn spawn_udp_recording(dir: &Path, extra: &[&str]) -> (std::process::Child, u16, PathBuf) {
     // Find a free loopback port for the recorder to bind.
     let port = {
         let probe = std::net::UdpSocket::bind("127.0.0.1:0").expect("probe");
         probe.local_addr().expect("addr").port()
     };
-    let profile_path = dir.path().join("ot.toml");
+    let profile_path = dir.join("ot.toml");
     std::fs::write(
         &profile_path,
         opentrack_profile(&format!("127.0.0.1:{port}"))
@@ -519,33 +519,38 @@ fn record_command_writes_a_session_of_live_udp_datagrams() {
             .expect("toml"),
     )
     .expect("write profile");
-    let out = dir.path().join("rec.session");
-    let mut child = leman()
+    let out = dir.join("rec.session");
+    let child = leman()
         .args(["record", "--profile"])
         .arg(&profile_path)
         .arg("--out")
         .arg(&out)
-        .args(["--seconds", "1.5", "--status-every", "0"])
+        .args(["--status-every", "0"])
+        .args(extra)
         .spawn()
         .expect("spawn leman record");
+    (child, port, out)
+}
+
+/// Sends OpenTrack datagrams whose x counts up from 0 to `port`, one every `every`, for `for_`;
+/// returns how many were sent.
+fn send_counting_datagrams(port: u16, for_: Duration, every: Duration) -> u32 {
     let client = std::net::UdpSocket::bind("127.0.0.1:0").expect("client");
     let start = Instant::now();
     let mut sent = 0;
-    while start.elapsed() < Duration::from_millis(1200) {
+    while start.elapsed() < for_ {
         let d = encode::opentrack::datagram([f64::from(sent), 0.0, 0.0, 0.0, 0.0, 0.0]);
         let _ = client.send_to(&d, ("127.0.0.1", port));
         sent += 1;
-        std::thread::sleep(Duration::from_millis(10));
+        std::thread::sleep(every);
     }
-    let status = child.wait().expect("wait");
-    assert!(status.success(), "leman record failed");
-    let session = Session::load(&out).expect("load recorded session");
+    sent
+}
+
+/// Checks that a recorded session's chunks are whole datagrams, in time order, and the ones
+/// sent in order (x counts up); returns how many there are.
+fn assert_datagrams_in_order(session: &Session) -> usize {
     let chunks: Vec<_> = session.chunks(0).collect();
-    assert!(
-        chunks.len() > 20,
-        "{} datagrams recorded of {sent}",
-        chunks.len()
-    );
     assert!(
         chunks.iter().all(|(_, b)| b.len() == 48),
         "one datagram per chunk"
@@ -554,12 +559,25 @@ fn record_command_writes_a_session_of_live_udp_datagrams() {
         chunks.windows(2).all(|w| w[0].0 <= w[1].0),
         "times never decrease"
     );
-    // The datagrams are the ones sent, in order (x counts up).
     let xs: Vec<f64> = chunks
         .iter()
         .map(|(_, b)| f64::from_le_bytes(b[..8].try_into().expect("8 bytes")))
         .collect();
     assert!(xs.windows(2).all(|w| w[1] > w[0]), "{xs:?}");
+    chunks.len()
+}
+
+#[test]
+fn record_command_writes_a_session_of_live_udp_datagrams() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (mut child, port, out) = spawn_udp_recording(dir.path(), &["--seconds", "1.5"]);
+    let sent =
+        send_counting_datagrams(port, Duration::from_millis(1200), Duration::from_millis(10));
+    let status = child.wait().expect("wait");
+    assert!(status.success(), "leman record failed");
+    let session = Session::load(&out).expect("load recorded session");
+    let recorded = assert_datagrams_in_order(&session);
+    assert!(recorded > 20, "{recorded} datagrams recorded of {sent}");
     let leftovers: Vec<PathBuf> = std::fs::read_dir(dir.path())
         .expect("list")
         .map(|e| e.expect("entry").path())
@@ -571,27 +589,7 @@ fn record_command_writes_a_session_of_live_udp_datagrams() {
 #[test]
 fn a_killed_recording_is_recovered_up_to_its_last_flush() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let port = {
-        let probe = std::net::UdpSocket::bind("127.0.0.1:0").expect("probe");
-        probe.local_addr().expect("addr").port()
-    };
-    let profile_path = dir.path().join("ot.toml");
-    std::fs::write(
-        &profile_path,
-        opentrack_profile(&format!("127.0.0.1:{port}"))
-            .to_toml()
-            .expect("toml"),
-    )
-    .expect("write profile");
-    let out = dir.path().join("rec.session");
-    let mut child = leman()
-        .args(["record", "--profile"])
-        .arg(&profile_path)
-        .arg("--out")
-        .arg(&out)
-        .args(["--status-every", "0"])
-        .spawn()
-        .expect("spawn leman record");
+    let (mut child, port, out) = spawn_udp_recording(dir.path(), &[]);
     // The recording has started (its clock too) when the partial file with its header exists.
     let partial = dir.path().join(".rec.session.partial");
     let waited = Instant::now();
@@ -602,17 +600,10 @@ fn a_killed_recording_is_recovered_up_to_its_last_flush() {
         );
         std::thread::sleep(Duration::from_millis(10));
     }
-    let client = std::net::UdpSocket::bind("127.0.0.1:0").expect("client");
-    let start = Instant::now();
-    let mut sent = 0;
-    while start.elapsed() < Duration::from_millis(2500) {
-        let d = encode::opentrack::datagram([f64::from(sent), 0.0, 0.0, 0.0, 0.0, 0.0]);
-        let _ = client.send_to(&d, ("127.0.0.1", port));
-        sent += 1;
-        // 20 a second: 50 datagrams are about 6 KiB of session lines, less than the writer's
-        // buffer holds, so only its flushes put them on disk before the kill.
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    // 20 a second: 50 datagrams are about 6 KiB of session lines, less than the writer's
+    // buffer holds, so only its flushes put them on disk before the kill.
+    let sent =
+        send_counting_datagrams(port, Duration::from_millis(2500), Duration::from_millis(50));
     // SIGKILL: no Ctrl-C handler, no `end` line, no rename.
     child.kill().expect("kill leman record");
     child.wait().expect("wait");
@@ -631,23 +622,10 @@ fn a_killed_recording_is_recovered_up_to_its_last_flush() {
         String::from_utf8_lossy(&run.stderr)
     );
     let session = Session::load(&recovered).expect("the recovered session loads strictly");
-    let chunks: Vec<_> = session.chunks(0).collect();
     // The recorder flushes at each second of recording, so the datagrams of the first two
     // seconds (about 40 of the 50 sent) are there whatever the kill interrupted.
-    assert!(
-        chunks.len() >= 10,
-        "{} of {sent} datagrams recovered",
-        chunks.len()
-    );
-    assert!(
-        chunks.iter().all(|(_, b)| b.len() == 48),
-        "one datagram per chunk"
-    );
-    let xs: Vec<f64> = chunks
-        .iter()
-        .map(|(_, b)| f64::from_le_bytes(b[..8].try_into().expect("8 bytes")))
-        .collect();
-    assert!(xs.windows(2).all(|w| w[1] > w[0]), "{xs:?}");
+    let recovered = assert_datagrams_in_order(&session);
+    assert!(recovered >= 10, "{recovered} of {sent} datagrams recovered");
 }
 
 #[test]
