@@ -255,33 +255,16 @@ impl Session {
 
     /// Parses session bytes; `path` names the file in errors. Never panics.
     pub fn parse(bytes: &[u8], path: &Path) -> Result<Self, SessionError> {
-        let reading = read_lines(bytes, path);
-        if let Some(stop) = reading.stop {
-            // Cut inside its last line (no line end after the fault), as a killed recording's
-            // buffered writes leave a file: recoverable when the header was read.
-            let cut_short = !bytes[bytes.len() - stop.bytes..].contains(&b'\n');
-            return Err(if cut_short && reading.header.is_some() {
-                with_recovery_hint(stop.reason)
-            } else {
-                stop.reason
-            });
+        let read = Self::recover(bytes, path)?;
+        match read.dropped {
+            None => Ok(read.session),
+            // Cut inside its last line or before `end` (no line end after the fault), as a
+            // killed recording's buffered writes leave a file: recoverable.
+            Some(stop) if !bytes[bytes.len() - stop.bytes..].contains(&b'\n') => {
+                Err(with_recovery_hint(stop.reason))
+            }
+            Some(stop) => Err(stop.reason),
         }
-        let header = reading
-            .header
-            .ok_or_else(|| no_header(bytes, path, reading.lines))?;
-        if !reading.ended {
-            let records = reading.records.len();
-            return Err(with_recovery_hint(no_end(
-                bytes,
-                path,
-                reading.lines,
-                records,
-            )));
-        }
-        Ok(Session {
-            header,
-            records: reading.records,
-        })
     }
 
     /// Reads what can be read of a cut-short or damaged session (a recording killed before it
@@ -289,26 +272,44 @@ impl Session {
     /// the header and every record up to the first line that is cut short, damaged or out of
     /// place. Fails only when the header itself cannot be read. Never panics.
     pub fn recover(bytes: &[u8], path: &Path) -> Result<Recovered, SessionError> {
-        let reading = read_lines(bytes, path);
-        let Some(header) = reading.header else {
-            return Err(reading
-                .stop
-                .map_or_else(|| no_header(bytes, path, reading.lines), |stop| stop.reason));
+        let mut reading = Reading {
+            header: None,
+            records: Vec::new(),
+            ended: false,
+            lines: 0,
+            last_at: Duration::ZERO,
         };
-        let dropped = match reading.stop {
-            Some(stop) => Some(stop),
-            None if !reading.ended => Some(Dropped {
+        let mut offset = 0usize;
+        let mut stop = None;
+        while offset < bytes.len() {
+            reading.lines += 1;
+            let start = offset;
+            match read_line(bytes, path, &mut reading, start) {
+                Ok(next) => offset = next,
+                Err(reason) => {
+                    stop = Some(Dropped {
+                        reason,
+                        bytes: bytes.len() - start,
+                    });
+                    break;
+                }
+            }
+        }
+        let Some(header) = reading.header else {
+            return Err(stop.map_or_else(|| no_header(bytes, path, reading.lines), |s| s.reason));
+        };
+        if stop.is_none() && !reading.ended {
+            stop = Some(Dropped {
                 reason: no_end(bytes, path, reading.lines, reading.records.len()),
                 bytes: 0,
-            }),
-            None => None,
-        };
+            });
+        }
         Ok(Recovered {
             session: Session {
                 header,
                 records: reading.records,
             },
-            dropped,
+            dropped: stop,
         })
     }
 
@@ -335,7 +336,8 @@ impl Session {
 pub struct Recovered {
     /// The header and the records read before the first fault.
     pub session: Session,
-    /// Why reading stopped short of a whole file, if it did.
+    /// Why reading stopped short of a whole file, if it did: `None` exactly when the file is
+    /// a whole session (header, records, a correct `end`).
     pub dropped: Option<Dropped>,
 }
 
@@ -350,7 +352,7 @@ pub struct Dropped {
     pub bytes: usize,
 }
 
-/// What [`read_lines`] read before the first fault.
+/// What [`read_line`] has read so far (for [`Session::recover`]).
 struct Reading {
     header: Option<SessionHeader>,
     records: Vec<Record>,
@@ -360,8 +362,6 @@ struct Reading {
     lines: usize,
     /// Time of the last record read (times never decrease).
     last_at: Duration,
-    /// The first fault, if any; nothing after it was read.
-    stop: Option<Dropped>,
 }
 
 /// `error` with a pointer to `leman record --recover`, for a file cut short after its header.
@@ -402,34 +402,6 @@ fn no_end(bytes: &[u8], path: &Path, lines: usize, records: usize) -> SessionErr
             "truncated: no `end` line after {records} records (the recording was cut short)"
         ),
     }
-}
-
-/// Reads a session's lines in order up to the first fault; `path` names the file in errors.
-fn read_lines(bytes: &[u8], path: &Path) -> Reading {
-    let mut reading = Reading {
-        header: None,
-        records: Vec::new(),
-        ended: false,
-        lines: 0,
-        last_at: Duration::ZERO,
-        stop: None,
-    };
-    let mut offset = 0usize;
-    while offset < bytes.len() {
-        reading.lines += 1;
-        let start = offset;
-        match read_line(bytes, path, &mut reading, start) {
-            Ok(next) => offset = next,
-            Err(reason) => {
-                reading.stop = Some(Dropped {
-                    reason,
-                    bytes: bytes.len() - start,
-                });
-                break;
-            }
-        }
-    }
-    reading
 }
 
 /// Reads the line starting at byte `start` (line number `reading.lines`) into `reading`;
