@@ -695,6 +695,21 @@ fn record_recover_keeps_the_whole_records_of_a_cut_short_recording() {
     let err = String::from_utf8_lossy(&same.stderr);
     assert!(err.contains("name a new file"), "{err}");
     assert_eq!(std::fs::read(&partial).expect("reread"), &text[..cut]);
+
+    // A file that cannot be read is named.
+    let missing = leman()
+        .args(["record", "--recover"])
+        .arg(dir.path().join("gone.partial"))
+        .arg("--out")
+        .arg(dir.path().join("x.session"))
+        .output()
+        .expect("run record --recover on a missing file");
+    assert!(!missing.status.success());
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(
+        err.contains("session ") && err.contains("gone.partial"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -114,8 +114,7 @@ fn recover(from: &Path, out: &Path) -> anyhow::Result<()> {
             out.display()
         );
     }
-    let bytes = std::fs::read(from).with_context(|| format!("cannot read {}", from.display()))?;
-    let recovered = Session::recover(&bytes, from)?;
+    let recovered = Session::recover_file(from)?;
     recovered.session.save(out)?;
     let session = &recovered.session;
     println!(

@@ -246,11 +246,12 @@ impl Session {
 
     /// Reads a session file.
     pub fn load(path: &Path) -> Result<Self, SessionError> {
-        let bytes = std::fs::read(path).map_err(|source| SessionError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::parse(&bytes, path)
+        Self::parse(&read_file(path)?, path)
+    }
+
+    /// Reads what can be read of a cut-short or damaged session file: [`Session::recover`].
+    pub fn recover_file(path: &Path) -> Result<Recovered, SessionError> {
+        Self::recover(&read_file(path)?, path)
     }
 
     /// Parses session bytes; `path` names the file in errors. Never panics.
@@ -362,6 +363,14 @@ struct Reading {
     lines: usize,
     /// Time of the last record read (times never decrease).
     last_at: Duration,
+}
+
+/// The bytes of the file at `path`; an error names it.
+fn read_file(path: &Path) -> Result<Vec<u8>, SessionError> {
+    std::fs::read(path).map_err(|source| SessionError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// `error` with a pointer to `leman record --recover`, for a file cut short after its header.
