@@ -567,6 +567,17 @@ fn assert_datagrams_in_order(session: &Session) -> usize {
     chunks.len()
 }
 
+/// Runs `leman record --recover FROM --out OUT`.
+fn record_recover(from: &Path, out: &Path) -> std::process::Output {
+    leman()
+        .args(["record", "--recover"])
+        .arg(from)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("run leman record --recover")
+}
+
 #[test]
 fn record_command_writes_a_session_of_live_udp_datagrams() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -609,13 +620,7 @@ fn a_killed_recording_is_recovered_up_to_its_last_flush() {
     child.wait().expect("wait");
     assert!(!out.exists(), "a killed recording never appears whole");
     let recovered = dir.path().join("recovered.session");
-    let run = leman()
-        .args(["record", "--recover"])
-        .arg(&partial)
-        .arg("--out")
-        .arg(&recovered)
-        .output()
-        .expect("run record --recover");
+    let run = record_recover(&partial, &recovered);
     assert!(
         run.status.success(),
         "{}",
@@ -661,13 +666,7 @@ fn record_recover_keeps_the_whole_records_of_a_cut_short_recording() {
         "{err}"
     );
 
-    let run = leman()
-        .args(["record", "--recover"])
-        .arg(&partial)
-        .arg("--out")
-        .arg(&out_path)
-        .output()
-        .expect("run record --recover");
+    let run = record_recover(&partial, &out_path);
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(
         run.status.success(),
@@ -684,26 +683,17 @@ fn record_recover_keeps_the_whole_records_of_a_cut_short_recording() {
     assert_eq!(recovered.records, whole.records[..kept]);
 
     // The file recovered from is never overwritten.
-    let same = leman()
-        .args(["record", "--recover"])
-        .arg(&partial)
-        .arg("--out")
-        .arg(&partial)
-        .output()
-        .expect("run record --recover onto itself");
+    let same = record_recover(&partial, &partial);
     assert!(!same.status.success());
     let err = String::from_utf8_lossy(&same.stderr);
     assert!(err.contains("name a new file"), "{err}");
     assert_eq!(std::fs::read(&partial).expect("reread"), &text[..cut]);
 
     // A file that cannot be read is named.
-    let missing = leman()
-        .args(["record", "--recover"])
-        .arg(dir.path().join("gone.partial"))
-        .arg("--out")
-        .arg(dir.path().join("x.session"))
-        .output()
-        .expect("run record --recover on a missing file");
+    let missing = record_recover(
+        &dir.path().join("gone.partial"),
+        &dir.path().join("x.session"),
+    );
     assert!(!missing.status.success());
     let err = String::from_utf8_lossy(&missing.stderr);
     assert!(
