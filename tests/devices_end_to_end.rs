@@ -505,7 +505,7 @@ fn leman() -> std::process::Command {
 
 /// `leman record` of an OpenTrack device on a free loopback port, into `dir/rec.session`, with
 /// `extra` arguments; returns the child, the port and the session's path.
-fn spawn_udp_recording(dir: &Path, extra: &[&str]) -> (std::process::Child, u16, PathBuf) {
+fn spawn_udp_recording(dir: &Path, extra: &[&str]) -> (Recorder, u16, PathBuf) {
     // Find a free loopback port for the recorder to bind.
     let port = {
         let probe = std::net::UdpSocket::bind("127.0.0.1:0").expect("probe");
@@ -529,7 +529,20 @@ fn spawn_udp_recording(dir: &Path, extra: &[&str]) -> (std::process::Child, u16,
         .args(extra)
         .spawn()
         .expect("spawn leman record");
-    (child, port, out)
+    (Recorder(child), port, out)
+}
+
+/// A running `leman record`, killed if a failing test leaves it running (it would otherwise
+/// run on, listening, after the test).
+struct Recorder(std::process::Child);
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
 }
 
 /// Sends OpenTrack datagrams whose x counts up from 0 to `port`, one every `every`, for `for_`;
@@ -584,7 +597,7 @@ fn record_command_writes_a_session_of_live_udp_datagrams() {
     let (mut child, port, out) = spawn_udp_recording(dir.path(), &["--seconds", "1.5"]);
     let sent =
         send_counting_datagrams(port, Duration::from_millis(1200), Duration::from_millis(10));
-    let status = child.wait().expect("wait");
+    let status = child.0.wait().expect("wait");
     assert!(status.success(), "leman record failed");
     let session = Session::load(&out).expect("load recorded session");
     let recorded = assert_datagrams_in_order(&session);
@@ -598,7 +611,7 @@ fn record_command_writes_a_session_of_live_udp_datagrams() {
 }
 
 #[test]
-fn a_killed_recording_is_recovered_up_to_its_last_flush() {
+fn a_killed_recording_is_recovered_up_to_its_last_flush_even_after_a_silence() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (mut child, port, out) = spawn_udp_recording(dir.path(), &[]);
     // The recording has started (its clock too) when the partial file with its header exists.
@@ -615,9 +628,34 @@ fn a_killed_recording_is_recovered_up_to_its_last_flush() {
     // buffer holds, so only its flushes put them on disk before the kill.
     let sent =
         send_counting_datagrams(port, Duration::from_millis(2500), Duration::from_millis(50));
+    let on_disk = || {
+        let bytes = std::fs::read(&partial).expect("read the partial file");
+        Session::recover(&bytes, &partial)
+            .expect("the partial file is recoverable while recording")
+            .session
+    };
+    // The recorder flushes at each second of recording, so the datagrams of the first two
+    // seconds (about 40 of the 50 sent) are on disk as the last ones arrive.
+    let flushed = on_disk().chunks(0).count();
+    assert!(flushed >= 10, "{flushed} of {sent} datagrams on disk");
+    // Then the tracker falls silent: with no record to carry a flush, the recorder's timer
+    // puts the last ones on disk within about a second.
+    let last_x = |s: &Session| {
+        s.chunks(0)
+            .last()
+            .map(|(_, b)| f64::from_le_bytes(b[..8].try_into().expect("8 bytes")))
+    };
+    let waited = Instant::now();
+    while last_x(&on_disk()) != Some(f64::from(sent - 1)) {
+        assert!(
+            waited.elapsed() < Duration::from_secs(20),
+            "the last datagram never reached the file"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
     // SIGKILL: no Ctrl-C handler, no `end` line, no rename.
-    child.kill().expect("kill leman record");
-    child.wait().expect("wait");
+    child.0.kill().expect("kill leman record");
+    child.0.wait().expect("wait");
     assert!(!out.exists(), "a killed recording never appears whole");
     let recovered = dir.path().join("recovered.session");
     let run = record_recover(&partial, &recovered);
@@ -627,10 +665,12 @@ fn a_killed_recording_is_recovered_up_to_its_last_flush() {
         String::from_utf8_lossy(&run.stderr)
     );
     let session = Session::load(&recovered).expect("the recovered session loads strictly");
-    // The recorder flushes at each second of recording, so the datagrams of the first two
-    // seconds (about 40 of the 50 sent) are there whatever the kill interrupted.
-    let recovered = assert_datagrams_in_order(&session);
-    assert!(recovered >= 10, "{recovered} of {sent} datagrams recovered");
+    assert_datagrams_in_order(&session);
+    assert_eq!(
+        last_x(&session),
+        Some(f64::from(sent - 1)),
+        "up to the last one sent"
+    );
 }
 
 #[test]

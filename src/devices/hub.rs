@@ -485,13 +485,42 @@ impl Shared {
         if let Some(w) = rec.as_mut()
             && let Err(e) = w.write(&make(at))
         {
-            let mut err = lock(&self.record_error);
-            if err.is_none() {
-                tracing::error!("recording failed: {e}");
-                *err = Some(e.to_string());
-            }
+            self.recording_failed(&e);
         }
         at
+    }
+
+    /// Puts the recording's buffered records on disk if they are [`FLUSH_EVERY`](crate::devices::session::FLUSH_EVERY) old on the
+    /// clock (see [`SessionWriter::flush_if_due`]).
+    fn flush_recording(&self) {
+        let mut rec = lock(&self.recorder);
+        if let Some(w) = rec.as_mut()
+            && let Err(e) = w.flush_if_due(self.clock.now())
+        {
+            self.recording_failed(&e);
+        }
+    }
+
+    /// Keeps the first recording error for [`Hub::record_error`].
+    fn recording_failed(&self, e: &SessionError) {
+        let mut err = lock(&self.record_error);
+        if err.is_none() {
+            tracing::error!("recording failed: {e}");
+            *err = Some(e.to_string());
+        }
+    }
+}
+
+/// How often a recording hub's flusher looks at the recording's buffer (real time).
+const FLUSH_TICK: Duration = Duration::from_millis(50);
+
+/// The recording hub's flusher: without it, records that came just before every device fell
+/// silent would wait in the writer's buffer for the next record, and a recording killed then
+/// would lose them however old they were.
+fn run_flusher(shared: &Shared) {
+    while !shared.stop.load(Ordering::SeqCst) {
+        std::thread::park_timeout(FLUSH_TICK);
+        shared.flush_recording();
     }
 }
 
@@ -508,6 +537,8 @@ pub struct HubOptions {
 pub struct Hub {
     shared: Arc<Shared>,
     threads: Vec<JoinHandle<()>>,
+    /// The recording's flusher (see [`FLUSH_EVERY`](crate::devices::session::FLUSH_EVERY)), when recording.
+    flusher: Option<JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for Hub {
@@ -574,7 +605,13 @@ impl Hub {
             record_error: Mutex::new(None),
             stop: AtomicBool::new(false),
         });
-        let mut threads = Vec::new();
+        // Built before any thread starts: if one cannot be started, dropping the hub stops
+        // those that did.
+        let mut hub = Self {
+            shared: Arc::clone(&shared),
+            threads: Vec::new(),
+            flusher: None,
+        };
         openers.resize_with(profile.devices.len(), || None);
         for (index, (decoder, opener)) in decoders.into_iter().zip(openers).enumerate() {
             let spec = &profile.devices[index];
@@ -608,7 +645,7 @@ impl Hub {
                         .name(format!("leman-device-{}", spec.name))
                         .spawn(move || reader.run())
                         .map_err(HubError::Thread)?;
-                    threads.push(handle);
+                    hub.threads.push(handle);
                 }
                 (DeviceKind::Wire(_), _, _) => {
                     let at = shared.clock.now();
@@ -616,7 +653,14 @@ impl Hub {
                 }
             }
         }
-        Ok(Self { shared, threads })
+        if options.record_to.is_some() {
+            let handle = std::thread::Builder::new()
+                .name("leman-recording-flush".into())
+                .spawn(move || run_flusher(&shared))
+                .map_err(HubError::Thread)?;
+            hub.flusher = Some(handle);
+        }
+        Ok(hub)
     }
 
     /// Every role's newest sample and every device's status, now. Never blocks on a device.
@@ -669,6 +713,10 @@ impl Hub {
 
     fn halt(&mut self) {
         self.shared.stop.store(true, Ordering::SeqCst);
+        if let Some(f) = self.flusher.take() {
+            f.thread().unpark();
+            let _ = f.join();
+        }
         for t in self.threads.drain(..) {
             let _ = t.join();
         }
@@ -1004,6 +1052,54 @@ mod tests {
             !replay.feed_desktop(DesktopEvent::FocusLost),
             "replays ignore live input"
         );
+    }
+
+    #[test]
+    fn a_recording_puts_its_records_on_disk_when_the_devices_fall_silent() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("quiet.session");
+        let partial = dir.path().join(".quiet.session.partial");
+        let clock = VirtualClock::new();
+        let hub = Hub::start(
+            Profile::desktop_default(),
+            Arc::new(clock.clone()),
+            HubOptions {
+                record_to: Some(out.clone()),
+            },
+        )
+        .expect("hub");
+        let desktop_records = || {
+            let bytes = std::fs::read(&partial).expect("the partial file");
+            Session::recover(&bytes, &partial)
+                .expect("recoverable")
+                .session
+                .records
+                .iter()
+                .filter(|r| matches!(r, Record::Desktop { .. }))
+                .count()
+        };
+        clock.set(Duration::from_millis(100));
+        assert!(hub.feed_desktop(DesktopEvent::MouseMove { x: 0.5, y: 0.5 }));
+        clock.set(Duration::from_millis(200));
+        assert!(hub.feed_desktop(DesktopEvent::Wheel { delta_lines: 1.0 }));
+        // Then nothing more comes. Under a second of recording, the events wait in the buffer
+        // (the flusher looks every FLUSH_TICK of real time).
+        std::thread::sleep(FLUSH_TICK * 4);
+        assert_eq!(desktop_records(), 0, "not due yet");
+        // A second after the start on the recording's clock, with no record to carry it, the
+        // flusher puts them on disk.
+        clock.set(Duration::from_millis(1100));
+        let waited = std::time::Instant::now();
+        while desktop_records() < 2 {
+            assert!(
+                waited.elapsed() < Duration::from_secs(10),
+                "the silent recording's events never reached the file"
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        hub.stop().expect("stop");
+        assert!(!partial.exists());
+        assert_eq!(Session::load(&out).expect("load").records.len(), 3);
     }
 
     #[test]

@@ -554,15 +554,18 @@ fn read_line(
 /// [`SessionWriter::finish`], so the target is either absent/old or complete. If the program dies
 /// first, the partial file stays: it has no `end` line, so loading it fails with a clear
 /// "truncated" error, and [`Session::recover`] (`leman record --recover`) keeps its records up
-/// to the writer's last flush (the header at once, then every [`FLUSH_EVERY`]).
+/// to the writer's last flush (the header at once, then every [`FLUSH_EVERY`], driven by the
+/// records written and by [`SessionWriter::flush_if_due`]).
 pub struct SessionWriter {
     file: std::io::BufWriter<std::fs::File>,
     partial: PathBuf,
     target: PathBuf,
     count: usize,
     last_at: Duration,
-    /// Record time of the last flush to the operating system.
+    /// Recording time of the last flush to the operating system.
     flushed_at: Duration,
+    /// Records written since the last flush (still in the buffer).
+    unflushed: usize,
     line: String,
 }
 
@@ -611,6 +614,7 @@ impl SessionWriter {
             count: 0,
             last_at: Duration::ZERO,
             flushed_at: Duration::ZERO,
+            unflushed: 0,
             line: String::new(),
         })
     }
@@ -628,18 +632,32 @@ impl SessionWriter {
             self.last_at = record.at();
             record.write_line(&mut self.line);
         }
-        let due = self.last_at.saturating_sub(self.flushed_at) >= FLUSH_EVERY;
         self.file
             .write_all(self.line.as_bytes())
-            .and_then(|()| if due { self.file.flush() } else { Ok(()) })
             .map_err(|source| SessionError::Io {
                 path: self.partial.clone(),
                 source,
             })?;
-        if due {
-            self.flushed_at = self.last_at;
-        }
         self.count += 1;
+        self.unflushed += 1;
+        self.flush_if_due(self.last_at)
+    }
+
+    /// Hands the buffered records to the operating system if there are any and `now`
+    /// (recording time, the clock the records are stamped on) is [`FLUSH_EVERY`] or more after
+    /// the last flush. [`SessionWriter::write`] calls it for each record; a recorder calls it
+    /// on a timer too, so that records made just before a device falls silent do not wait in
+    /// the buffer for the next one.
+    pub fn flush_if_due(&mut self, now: Duration) -> Result<(), SessionError> {
+        if self.unflushed == 0 || now.saturating_sub(self.flushed_at) < FLUSH_EVERY {
+            return Ok(());
+        }
+        self.file.flush().map_err(|source| SessionError::Io {
+            path: self.partial.clone(),
+            source,
+        })?;
+        self.flushed_at = now;
+        self.unflushed = 0;
         Ok(())
     }
 
@@ -912,6 +930,47 @@ mod tests {
         let left = on_disk();
         assert_eq!(left.session.records.len(), 26);
         assert!(!target.exists());
+    }
+
+    #[test]
+    fn records_before_a_silence_reach_the_file_on_the_timer() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("rec.session");
+        let header = SessionHeader::new(Profile::desktop_default());
+        let mut w = SessionWriter::create(&target, &header).expect("create");
+        let partial = dir.path().join(".rec.session.partial");
+        let on_disk = || {
+            let bytes = std::fs::read(&partial).expect("the partial file");
+            Session::recover(&bytes, &partial)
+                .expect("recoverable")
+                .session
+                .records
+                .len()
+        };
+        for ms in [100, 200, 300] {
+            w.write(&Record::Opened {
+                at: Duration::from_millis(ms),
+                device: 0,
+            })
+            .expect("write");
+        }
+        // The device falls silent: no record comes to carry the flush.
+        w.flush_if_due(Duration::from_millis(999)).expect("flush");
+        assert_eq!(on_disk(), 0, "not due before a second of recording");
+        w.flush_if_due(Duration::from_millis(1000)).expect("flush");
+        assert_eq!(on_disk(), 3, "due at a second: all three on disk");
+        // The next second counts from that flush, and an empty buffer is not flushed again.
+        w.write(&Record::Opened {
+            at: Duration::from_millis(1500),
+            device: 0,
+        })
+        .expect("write");
+        w.flush_if_due(Duration::from_millis(1999)).expect("flush");
+        assert_eq!(on_disk(), 3);
+        w.flush_if_due(Duration::from_millis(2000)).expect("flush");
+        assert_eq!(on_disk(), 4);
+        let path = w.finish().expect("finish");
+        assert_eq!(Session::load(&path).expect("load").records.len(), 4);
     }
 
     #[test]
