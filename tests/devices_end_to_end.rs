@@ -767,6 +767,57 @@ fn record_command_names_the_profile_file_and_field_on_errors() {
 }
 
 #[test]
+fn record_command_refuses_spans_that_are_not_seconds() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/desktop.toml");
+    // Each used to be taken as "no limit": the recording ran until Ctrl-C.
+    for (flag, value) in [
+        ("--seconds", "-1"),
+        ("--seconds", "nan"),
+        ("--seconds", "inf"),
+        ("--seconds", "ten"),
+        ("--status-every", "-2"),
+    ] {
+        let mut run = Recorder(
+            leman()
+                .args(["record", "--profile"])
+                .arg(&profile)
+                .arg("--out")
+                .arg(dir.path().join("x.session"))
+                .arg(format!("{flag}={value}"))
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("run"),
+        );
+        let waited = Instant::now();
+        let status = loop {
+            if let Some(status) = run.0.try_wait().expect("wait") {
+                break status;
+            }
+            // Dropping `run` kills a recorder that took the span as "no limit".
+            assert!(
+                waited.elapsed() < Duration::from_secs(20),
+                "{flag} {value}: still recording"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        assert_eq!(status.code(), Some(2), "{flag} {value}");
+        let mut err = String::new();
+        std::io::Read::read_to_string(run.0.stderr.as_mut().expect("piped stderr"), &mut err)
+            .expect("read stderr");
+        assert!(
+            err.contains(flag) && err.contains("not a number of seconds"),
+            "{flag} {value}: {err}"
+        );
+    }
+    assert_eq!(
+        std::fs::read_dir(dir.path()).expect("list").count(),
+        0,
+        "nothing recorded"
+    );
+}
+
+#[test]
 fn devices_command_lists_as_json() {
     let out = leman().args(["devices", "--json"]).output().expect("run");
     assert!(

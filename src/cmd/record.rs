@@ -20,16 +20,26 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Stop by itself after this many seconds (default: run until Ctrl-C).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = seconds_arg)]
     pub seconds: Option<f64>,
     /// Print each device's state and rate every this many seconds (0 = never).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = seconds_arg)]
     pub status_every: f64,
     /// Instead of recording: read a recording that was cut short (the `.NAME.partial` file a
     /// killed `leman record` leaves) or damaged, and write its header and every record before
     /// the first fault to `--out` as a whole session. The file read is left as it is.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["profile", "seconds"])]
     pub recover: Option<PathBuf>,
+}
+
+/// A span of seconds on the command line: finite and not negative (a NaN or negative
+/// `--seconds` used to be taken as "no limit" and recorded until Ctrl-C).
+fn seconds_arg(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if s.is_finite() && s >= 0.0 => Ok(s),
+        Ok(s) => Err(format!("{s} is not a number of seconds (need 0 or more)")),
+        Err(e) => Err(format!("{text:?} is not a number of seconds: {e}")),
+    }
 }
 
 /// Runs `leman record`.
@@ -67,12 +77,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_default()
     );
     let started = Instant::now();
+    // `seconds_arg` took only finite spans of 0 or more; `try_from` still refuses one too long
+    // for a `Duration` (over about 584 000 years), which then means no limit.
     let limit = args
         .seconds
-        .filter(|s| s.is_finite() && *s >= 0.0)
-        .map(Duration::from_secs_f64);
-    let every = (args.status_every.is_finite() && args.status_every > 0.0)
-        .then(|| Duration::from_secs_f64(args.status_every));
+        .and_then(|s| Duration::try_from_secs_f64(s).ok());
+    let every = (args.status_every > 0.0)
+        .then(|| Duration::try_from_secs_f64(args.status_every).ok())
+        .flatten();
     let mut last_status = Instant::now();
     while !stop.load(Ordering::SeqCst) && limit.is_none_or(|l| started.elapsed() < l) {
         std::thread::sleep(Duration::from_millis(20));
