@@ -585,4 +585,77 @@ mod tests {
             }
         );
     }
+
+    /// One sample of the property test below: near a corner of [`known_screen`] (as touched),
+    /// anywhere within a tracker's reach, anywhere a finite file may put it, or one fixed point
+    /// (every corner the same: the most degenerate input).
+    fn any_sample() -> impl Strategy<Value = (u8, [f32; 3])> {
+        let kind = prop_oneof![6 => Just(0u8), 1 => Just(1u8), 1 => Just(2u8), 1 => Just(3u8)];
+        (kind, [-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0])
+    }
+
+    fn place(corner: Corner, (kind, r): (u8, [f32; 3])) -> Vec3 {
+        let r = Vec3::from_array(r);
+        match kind {
+            0 => known_screen().corner_m(corner) + r * 0.005,
+            1 => r * 2.0,
+            2 => r * 1e6,
+            _ => Vec3::new(0.1, 0.2, 0.3),
+        }
+    }
+
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Whatever finite samples a corners file or a session gives (all within the ±1e6 m
+        /// `leman calibrate --corners` accepts), the fit is a finite screen or a refusal,
+        /// never a panic or a NaN: with the default tolerances and with tolerances so loose
+        /// that degenerate corners reach the rectangle's own construction.
+        #[test]
+        fn any_finite_samples_give_a_finite_screen_or_a_refusal(
+            corners in proptest::array::uniform4(proptest::option::weighted(
+                0.9,
+                proptest::collection::vec(any_sample(), 0..6),
+            )),
+            loose: bool,
+        ) {
+            let mut samples = CornerSamples::new();
+            for (corner, raw) in Corner::ALL.into_iter().zip(&corners) {
+                if let Some(raw) = raw {
+                    samples.insert(corner, raw.iter().map(|s| place(corner, *s)).collect());
+                }
+            }
+            let options = if loose {
+                FitOptions {
+                    outlier_factor: 1e9,
+                    outlier_floor_m: 1e9,
+                    max_corner_spread_m: 1e9,
+                    max_angle_error_deg: 90.0,
+                    max_edge_ratio: 1e9,
+                    max_residual_m: 1e9,
+                }
+            } else {
+                FitOptions::default()
+            };
+            match fit_screen(&samples, &options) {
+                Ok(fit) => {
+                    for c in Corner::ALL {
+                        prop_assert!(fit.screen.corner_m(c).is_finite(), "{fit:?}");
+                    }
+                    prop_assert!(fit.screen.width_m() > 0.0 && fit.screen.height_m() > 0.0);
+                    prop_assert!(fit.screen.normal().is_finite(), "{fit:?}");
+                    prop_assert!(fit.residual_m.is_finite() && fit.residual_m >= 0.0);
+                    prop_assert!(fit.non_planarity_m.is_finite());
+                    prop_assert!(fit.measured_angle_deg.is_finite());
+                    for r in &fit.corners {
+                        prop_assert!(r.measured_m.is_finite() && r.error_m.is_finite());
+                        let given = samples.get(&r.corner).map_or(0, Vec::len);
+                        prop_assert_eq!(r.kept + r.rejected, given);
+                        prop_assert!(r.kept > 0);
+                    }
+                }
+                Err(e) => prop_assert!(!e.to_string().is_empty()),
+            }
+        }
+    }
 }
