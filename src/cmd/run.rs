@@ -1,6 +1,6 @@
 //! `leman run` (and plain `leman`): opens the workstation window on the default character with
-//! the default calibration and the devices of a profile (the desktop mouse and keyboard when no
-//! profile is given).
+//! the default calibration and the devices of a profile (when no profile is given, the desktop
+//! mouse and keyboard, with a plugged-in HID SpaceMouse flying the view: `devices::found`).
 
 use anyhow::Context;
 use leman::app::scheduler::{Pacing, Scheduler, SchedulerConfig};
@@ -25,7 +25,8 @@ pub struct Args {
     /// Character file (default: assets/characters/torso.toml).
     #[arg(long)]
     pub character: Option<PathBuf>,
-    /// Device profile (TOML); default: the desktop mouse and keyboard.
+    /// Device profile (TOML); default: the desktop mouse and keyboard, with a plugged-in
+    /// SpaceMouse (USB HID) flying the view.
     #[arg(long)]
     pub profile: Option<PathBuf>,
     /// Calibration profile (default: the built-in desktop).
@@ -80,8 +81,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => StereoMode::Mono,
     };
     let profile = match &args.profile {
-        Some(p) => Some(Profile::load(p)?),
-        None => None,
+        Some(p) => Profile::load(p)?,
+        None => {
+            // What is plugged in: a HID 3D mouse is taken up; nothing else can be named without
+            // a profile (leman::devices::found).
+            let hid = leman::devices::enumerate::list_hid().unwrap_or_else(|e| {
+                eprintln!("warning: cannot list HID devices ({e}); using the desktop stand-ins");
+                Vec::new()
+            });
+            let found = leman::devices::found::profile_for(&hid);
+            eprintln!("{}", found.summary);
+            found.profile
+        }
     };
     let size = match &args.size {
         Some(s) => setup::parse_size(s)?,
@@ -93,7 +104,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             calibration,
             mode,
             replay: None,
-            profile,
+            profile: Some(profile),
             ratio: args.ratio,
             adapt: args.adapt,
             log: args.log.clone(),

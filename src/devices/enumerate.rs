@@ -130,30 +130,38 @@ pub fn list_devices() -> DeviceList {
          identified from the port: name the protocol in a device profile"
             .into(),
     );
-    match hidapi::HidApi::new() {
-        Ok(api) => {
-            for d in api.device_list() {
-                let matched = match_hid(d.vendor_id(), d.product_id());
-                out.hid.push(HidEntry {
-                    vendor_id: d.vendor_id(),
-                    product_id: d.product_id(),
-                    serial: d.serial_number().map(str::to_string),
-                    manufacturer: d.manufacturer_string().map(str::to_string),
-                    product: d.product_string().map(str::to_string),
-                    interface: d.interface_number(),
-                    path: d.path().to_string_lossy().into_owned(),
-                    supported_model: matched.map(|(_, m)| m.to_string()),
-                    protocol: matched.map(|(p, _)| p),
-                });
-            }
-        }
-        Err(e) => out.hid_error = Some(e.to_string()),
+    match list_hid() {
+        Ok(hid) => out.hid = hid,
+        Err(e) => out.hid_error = Some(e),
     }
     out.notes.push(
         "OpenTrack sends UDP to port 4242 by default: use a profile with an opentrack device"
             .into(),
     );
     out
+}
+
+/// Lists the HID devices (interfaces) alone, marking supported 3D mice; the error says why they
+/// could not be listed.
+pub fn list_hid() -> Result<Vec<HidEntry>, String> {
+    let api = hidapi::HidApi::new().map_err(|e| e.to_string())?;
+    Ok(api
+        .device_list()
+        .map(|d| {
+            let matched = match_hid(d.vendor_id(), d.product_id());
+            HidEntry {
+                vendor_id: d.vendor_id(),
+                product_id: d.product_id(),
+                serial: d.serial_number().map(str::to_string),
+                manufacturer: d.manufacturer_string().map(str::to_string),
+                product: d.product_string().map(str::to_string),
+                interface: d.interface_number(),
+                path: d.path().to_string_lossy().into_owned(),
+                supported_model: matched.map(|(_, m)| m.to_string()),
+                protocol: matched.map(|(p, _)| p),
+            }
+        })
+        .collect())
 }
 
 /// The listing as text for a terminal.

@@ -9,6 +9,7 @@ pub mod driver;
 pub mod encode;
 pub mod enumerate;
 pub mod fastrak;
+pub mod found;
 pub mod fuzz_harness;
 pub mod hub;
 pub mod logitech;
