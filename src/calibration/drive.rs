@@ -23,8 +23,11 @@ impl SnapshotFeeder {
         Self::default()
     }
 
-    /// Feeds the wand's newest sample in `snapshot` if it is new (and its device is not lost);
-    /// returns what the procedure made of it.
+    /// Feeds the wand's newest sample in `snapshot` if it is new, its device is not lost and it
+    /// is not the desktop mouse standing in for the wand ([`RoleSample::stand_in`]: the mouse
+    /// has no 3D position to touch a corner with); returns what the procedure made of it.
+    ///
+    /// [`RoleSample::stand_in`]: crate::devices::hub::RoleSample::stand_in
     pub fn feed(
         &mut self,
         procedure: &mut CornerProcedure,
@@ -35,7 +38,7 @@ impl SnapshotFeeder {
         let (Some(at), Some(pose)) = (wand.at, wand.pose) else {
             return None;
         };
-        if wand.state == DeviceState::Lost || self.last_at == Some(at) {
+        if wand.state == DeviceState::Lost || wand.stand_in || self.last_at == Some(at) {
             return None;
         }
         self.last_at = Some(at);
@@ -95,4 +98,46 @@ pub fn run_on_session_with(
         }
     }
     Ok(procedure)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::devices::hub::RoleSample;
+    use crate::pose::Pose;
+
+    fn snapshot(stand_in: bool) -> HubSnapshot {
+        let sample = |role| RoleSample {
+            role,
+            device: Some(0),
+            pose: Some(Pose::IDENTITY),
+            axes: [0.0; 6],
+            pressed: vec![0],
+            at: Some(Duration::from_millis(5)),
+            state: DeviceState::Running,
+            stand_in,
+        };
+        HubSnapshot {
+            now: Duration::from_millis(5),
+            roles: Role::ALL.map(sample),
+            devices: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_mouse_standing_in_for_a_lost_wand_touches_no_corner() {
+        let frames = TrackerFrames::default();
+        let mut procedure = CornerProcedure::new(ProcedureConfig::default());
+        let mut feeder = SnapshotFeeder::new();
+        assert_eq!(
+            feeder.feed(&mut procedure, &snapshot(true), &frames),
+            None,
+            "ignored"
+        );
+        // The same sample from the wand's own tracker is taken (a press, too early to record).
+        assert_eq!(
+            feeder.feed(&mut procedure, &snapshot(false), &frames),
+            Some(ProcedureEvent::PressIgnoredTooFewSamples { samples: 1 })
+        );
+    }
 }

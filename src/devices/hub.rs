@@ -107,6 +107,12 @@ pub struct RoleSample {
     pub at: Option<Duration>,
     /// State of the bound device ([`DeviceState::Lost`] when nothing is bound).
     pub state: DeviceState,
+    /// Whether this is the desktop stand-in's sample (then `device` is the desktop device and
+    /// `state` its state): the wand and navigation roles fall back to the mouse and keyboard
+    /// while the device bound to them is lost or still opening, or when none is bound, if the
+    /// profile has a desktop device. The head does not: a lost head tracker's last pose is
+    /// kept, and with none the view is from the calibrated position.
+    pub stand_in: bool,
 }
 
 impl RoleSample {
@@ -119,8 +125,47 @@ impl RoleSample {
             pressed: Vec::new(),
             at: None,
             state: DeviceState::Lost,
+            stand_in: false,
         }
     }
+
+    /// Takes `event` from a device bound to this role by `binding`, arrived at `at`.
+    fn offer(&mut self, binding: &RoleBinding, event: &DeviceEvent, at: Duration) {
+        match (event, binding.input) {
+            (DeviceEvent::Pose(p), Input::Pose) if p.station == binding.station => {
+                if let Some(pose) = binding.map.apply_pose(&p.pose) {
+                    self.pose = Some(pose);
+                    self.pressed.clone_from(&p.pressed);
+                    self.at = Some(at);
+                }
+            }
+            (DeviceEvent::Axes(a), Input::Axes) => {
+                self.axes = binding.map.apply_axes(a.value);
+                self.at = Some(at);
+            }
+            (DeviceEvent::Buttons { pressed }, Input::Axes) => {
+                self.pressed.clone_from(pressed);
+                self.at = Some(at);
+            }
+            _ => {}
+        }
+    }
+}
+
+/// The desktop device's samples for every role as the default desktop profile binds them
+/// (whatever the profile binds), for [`RoleSample::stand_in`].
+struct StandIns {
+    /// Index of the profile's desktop device.
+    device: usize,
+    /// The stand-in for each role, in [`Role::ALL`] order.
+    roles: [RoleSample; 3],
+    /// [`Profile::desktop_default`]'s bindings.
+    bindings: Vec<RoleBinding>,
+}
+
+/// Whether a role falls back to the desktop stand-in while its own device cannot serve it.
+fn takes_stand_in(role: Role) -> bool {
+    role != Role::Head
 }
 
 /// What the frame loop reads: every role's newest sample and every device's status.
@@ -163,6 +208,7 @@ pub struct HubState {
     devices: Vec<DeviceStatus>,
     bindings: Vec<Vec<RoleBinding>>,
     desktop: Option<(usize, DesktopDevice)>,
+    stand_ins: Option<StandIns>,
     events: VecDeque<TimedEvent>,
 }
 
@@ -211,12 +257,22 @@ impl HubState {
             .iter()
             .position(|d| d.protocol == DeviceKind::Desktop)
             .map(|i| (i, DesktopDevice::new(profile.devices[i].desktop.clone())));
+        let stand_ins = desktop.as_ref().map(|(device, _)| StandIns {
+            device: *device,
+            roles: Role::ALL.map(|role| RoleSample {
+                device: Some(*device),
+                stand_in: true,
+                ..RoleSample::empty(role)
+            }),
+            bindings: Profile::desktop_default().roles,
+        });
         Self {
             profile,
             roles,
             devices,
             bindings,
             desktop,
+            stand_ins,
             events: VecDeque::new(),
         }
     }
@@ -321,24 +377,11 @@ impl HubState {
                 DeviceEvent::Status(StatusEvent::Report { .. }) | DeviceEvent::Buttons { .. } => {}
             }
             for b in self.bindings.get(device).into_iter().flatten() {
-                let role = &mut self.roles[b.role.index()];
-                match (event, b.input) {
-                    (DeviceEvent::Pose(p), Input::Pose) if p.station == b.station => {
-                        if let Some(pose) = b.map.apply_pose(&p.pose) {
-                            role.pose = Some(pose);
-                            role.pressed.clone_from(&p.pressed);
-                            role.at = Some(at);
-                        }
-                    }
-                    (DeviceEvent::Axes(a), Input::Axes) => {
-                        role.axes = b.map.apply_axes(a.value);
-                        role.at = Some(at);
-                    }
-                    (DeviceEvent::Buttons { pressed }, Input::Axes) => {
-                        role.pressed.clone_from(pressed);
-                        role.at = Some(at);
-                    }
-                    _ => {}
+                self.roles[b.role.index()].offer(b, event, at);
+            }
+            if let Some(stand_ins) = self.stand_ins.as_mut().filter(|s| s.device == device) {
+                for b in &stand_ins.bindings {
+                    stand_ins.roles[b.role.index()].offer(b, event, at);
                 }
             }
             if self.events.len() >= EVENT_QUEUE_LEN {
@@ -385,6 +428,20 @@ impl HubState {
                 if axes_role {
                     r.axes = [0.0; 6];
                 }
+            }
+            if let Some(stand_ins) = &self.stand_ins
+                && takes_stand_in(r.role)
+                && r.device != Some(stand_ins.device)
+                && matches!(r.state, DeviceState::Lost | DeviceState::Opening)
+            {
+                let desktop_state = self
+                    .devices
+                    .get(stand_ins.device)
+                    .map_or(DeviceState::Lost, |s| s.state);
+                *r = RoleSample {
+                    state: desktop_state,
+                    ..stand_ins.roles[r.role.index()].clone()
+                };
             }
         }
         HubSnapshot {
@@ -1100,6 +1157,137 @@ mod tests {
         hub.stop().expect("stop");
         assert!(!partial.exists());
         assert_eq!(Session::load(&out).expect("load").records.len(), 3);
+    }
+
+    /// The desktop default with a tracker (device 1) on the head (station 2) and the wand
+    /// (station 1), and a SpaceMouse (device 2) flying.
+    fn tracked_profile() -> Profile {
+        let mut p = crate::devices::found::profile_for(&[]).profile;
+        let mut tracker = p.devices[0].clone();
+        tracker.name = "tracker".into();
+        tracker.protocol = DeviceKind::Wire(crate::devices::protocol::Protocol::Opentrack);
+        tracker.transport = TransportSpec::Udp(Default::default());
+        let mut mouse = tracker.clone();
+        mouse.name = "mouse3d".into();
+        mouse.protocol = DeviceKind::Wire(crate::devices::protocol::Protocol::SpacemouseHid);
+        mouse.transport = TransportSpec::Hid(Default::default());
+        p.devices.extend([tracker, mouse]);
+        for b in &mut p.roles {
+            (b.device, b.station) = match b.role {
+                Role::Head => ("tracker".into(), 2),
+                Role::Wand => ("tracker".into(), 1),
+                Role::Navigation => ("mouse3d".into(), 1),
+            };
+        }
+        p.validate(std::path::Path::new("tracked")).expect("valid");
+        p
+    }
+
+    fn pose_at(station: u8, x: f32) -> DeviceEvent {
+        DeviceEvent::Pose(crate::devices::sample::PoseSample {
+            station,
+            pose: Pose::new(glam::Vec3::new(x, 0.0, 0.0), glam::Quat::IDENTITY),
+            raw_position: [f64::from(x), 0.0, 0.0],
+            raw_orientation: crate::devices::sample::RawOrientation::EulerDeg([0.0; 3]),
+            pressed: Vec::new(),
+            status: None,
+        })
+    }
+
+    #[test]
+    fn the_mouse_and_keyboard_stand_in_for_a_missing_wand_and_navigation() {
+        let ms = Duration::from_millis;
+        let mut state = HubState::new(tracked_profile());
+        state.opened(0, ms(0));
+        // Nothing of the tracker or the SpaceMouse yet: both still opening.
+        state.desktop_event(ms(10), &DesktopEvent::MouseMove { x: 0.75, y: 0.5 });
+        state.desktop_event(
+            ms(20),
+            &DesktopEvent::Key {
+                name: "W".into(),
+                pressed: true,
+            },
+        );
+        let snap = state.snapshot(ms(30));
+        let (wand, nav, head) = (
+            snap.role(Role::Wand),
+            snap.role(Role::Navigation),
+            snap.role(Role::Head),
+        );
+        assert!(wand.stand_in && nav.stand_in, "{snap:#?}");
+        assert_eq!((wand.device, nav.device), (Some(0), Some(0)));
+        assert_eq!(wand.state, DeviceState::Running, "the desktop's state");
+        let mouse_wand = wand.pose.expect("the mouse's wand pose");
+        assert!(mouse_wand.position_m.x > 0.0, "cursor right of centre");
+        assert_eq!(nav.axes[2], -1.0, "W flies forward");
+        assert!(
+            !head.stand_in && head.pose.is_none(),
+            "the head does not fall back"
+        );
+        // The devices come up: their own samples take over.
+        for d in [1, 2] {
+            state.opened(d, ms(40));
+            state.running(d, ms(40));
+        }
+        let axes = DeviceEvent::Axes(crate::devices::sample::AxesSample {
+            raw: [0; 6],
+            value: [0.0, 0.0, 0.0, 0.0, 0.5, 0.0],
+        });
+        state.chunk(1, ms(50), 48, &[pose_at(1, -0.2), pose_at(2, 0.1)]);
+        state.chunk(2, ms(50), 13, &[axes]);
+        let snap = state.snapshot(ms(60));
+        let (wand, nav, head) = (
+            snap.role(Role::Wand),
+            snap.role(Role::Navigation),
+            snap.role(Role::Head),
+        );
+        assert!(!wand.stand_in && !nav.stand_in && !head.stand_in);
+        assert_eq!((wand.device, nav.device), (Some(1), Some(2)));
+        assert_eq!(wand.pose.expect("tracked wand").position_m.x, -0.2);
+        assert_eq!(
+            nav.axes,
+            [0.0, 0.0, 0.0, 0.0, 0.5, 0.0],
+            "the SpaceMouse's, not W's"
+        );
+        // Both unplugged: the stand-ins again, with what the mouse and keyboard did meanwhile.
+        state.desktop_event(
+            ms(70),
+            &DesktopEvent::Key {
+                name: "W".into(),
+                pressed: false,
+            },
+        );
+        state.lost(1, ms(80), "unplugged");
+        state.lost(2, ms(80), "unplugged");
+        let snap = state.snapshot(ms(90));
+        let (wand, nav, head) = (
+            snap.role(Role::Wand),
+            snap.role(Role::Navigation),
+            snap.role(Role::Head),
+        );
+        assert!(wand.stand_in && nav.stand_in);
+        assert_eq!(wand.pose, Some(mouse_wand));
+        assert_eq!(nav.axes, [0.0; 6], "W was let go");
+        assert!(!head.stand_in);
+        assert_eq!(head.state, DeviceState::Lost);
+        assert_eq!(
+            head.pose.expect("the head's last pose").position_m.x,
+            0.1,
+            "a lost head tracker's last pose is kept"
+        );
+    }
+
+    #[test]
+    fn without_a_desktop_device_nothing_stands_in() {
+        let mut p = tracked_profile();
+        p.devices.remove(0);
+        let mut state = HubState::new(p);
+        let snap = state.snapshot(Duration::ZERO);
+        for r in &snap.roles {
+            assert!(!r.stand_in, "{r:?}");
+            assert!(r.device.is_some(), "{r:?}");
+            assert_eq!(r.state, DeviceState::Opening, "its own device's state");
+        }
     }
 
     #[test]

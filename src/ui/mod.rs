@@ -354,7 +354,8 @@ fn integrator_label(k: IntegratorKind) -> &'static str {
     }
 }
 
-/// Devices: each role's device, state, sample rate and the age of its newest sample.
+/// Devices: each role's device (the desktop's marked "standing in" while it serves a role
+/// whose own device is lost or opening), state, sample rate and the age of its newest sample.
 pub fn devices_ui(ui: &mut egui::Ui, state: &AppState) {
     let Some(snapshot) = &state.last_snapshot else {
         ui.label("no device snapshot yet");
@@ -376,7 +377,10 @@ pub fn devices_ui(ui: &mut egui::Ui, state: &AppState) {
                 ui.label(role.name());
                 ui.label(device.map_or_else(
                     || "none (default)".to_owned(),
-                    |d| format!("{} ({})", d.name, d.protocol),
+                    |d| {
+                        let stand_in = if sample.stand_in { ", standing in" } else { "" };
+                        format!("{} ({}{stand_in})", d.name, d.protocol)
+                    },
                 ));
                 ui.label(state_label(device.map_or(sample.state, |d| d.state)));
                 ui.label(device.map_or("–".into(), |d| format!("{:.0} Hz", d.rate_hz)));
