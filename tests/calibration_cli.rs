@@ -187,6 +187,21 @@ fn corners_file_in_centimetres_is_fitted_and_saved() {
 }
 
 #[test]
+fn live_calibration_refuses_a_mouse_for_a_wand() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out_path = dir.path().join("cal.toml");
+    let out = out_path.to_str().expect("utf-8 path");
+    for profile in ["devices/desktop.toml", "devices/opentrack-spacemouse.toml"] {
+        let err = err_text(&leman(&["calibrate", "--profile", profile, "--out", out]));
+        assert!(
+            err.contains(profile) && err.contains("no 3D") && err.contains("\"desktop\""),
+            "{err}"
+        );
+    }
+    assert!(!out_path.exists(), "nothing written");
+}
+
+#[test]
 fn bad_corner_files_fail_clearly() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out_path = dir.path().join("never.toml");

@@ -11,7 +11,7 @@ use leman::calibration::{
 };
 use leman::clock::RealClock;
 use leman::devices::hub::{Hub, HubOptions};
-use leman::devices::profile::{Profile as DeviceProfile, Role};
+use leman::devices::profile::{DeviceKind, Profile as DeviceProfile, Role};
 use leman::devices::session::Session;
 use leman::pose::Pose;
 use leman::stereo::{EyeView, ViewSettings, eye_views};
@@ -428,8 +428,19 @@ fn live(args: &Args, base: &CalibrationProfile, narrator: &mut Narrator) -> anyh
         );
     };
     let profile = DeviceProfile::load(devices)?;
-    if profile.binding(Role::Wand).is_none() {
+    let Some(wand) = profile.binding(Role::Wand) else {
         bail!("{}: no device is bound to the wand role", devices.display());
+    };
+    let wand_device = profile
+        .device_index(&wand.device)
+        .map(|i| &profile.devices[i]);
+    if wand_device.is_some_and(|d| d.protocol == DeviceKind::Desktop) {
+        bail!(
+            "{}: the wand role is bound to the desktop device {:?}, but the mouse has no 3D \
+             position to touch the corners with: bind it to a tracker",
+            devices.display(),
+            wand.device
+        );
     }
     let stop = Arc::new(AtomicBool::new(false));
     {
