@@ -1023,19 +1023,24 @@ mod tests {
         }
     }
 
+    /// A hub of the desktop default on `clock`, recording to `out`.
+    fn recording_desktop_hub(out: &std::path::Path, clock: &VirtualClock) -> Hub {
+        Hub::start(
+            Profile::desktop_default(),
+            Arc::new(clock.clone()),
+            HubOptions {
+                record_to: Some(out.to_path_buf()),
+            },
+        )
+        .expect("hub")
+    }
+
     #[test]
     fn desktop_events_are_recorded_on_the_clock_and_replay_identically() {
         let dir = tempfile::tempdir().expect("tempdir");
         let out = dir.path().join("desk.session");
         let clock = VirtualClock::new();
-        let hub = Hub::start(
-            Profile::desktop_default(),
-            Arc::new(clock.clone()),
-            HubOptions {
-                record_to: Some(out.clone()),
-            },
-        )
-        .expect("hub");
+        let hub = recording_desktop_hub(&out, &clock);
         let start = hub.snapshot();
         assert_eq!(start.devices[0].state, DeviceState::Running);
         assert!(
@@ -1117,20 +1122,9 @@ mod tests {
         let out = dir.path().join("quiet.session");
         let partial = dir.path().join(".quiet.session.partial");
         let clock = VirtualClock::new();
-        let hub = Hub::start(
-            Profile::desktop_default(),
-            Arc::new(clock.clone()),
-            HubOptions {
-                record_to: Some(out.clone()),
-            },
-        )
-        .expect("hub");
+        let hub = recording_desktop_hub(&out, &clock);
         let desktop_records = || {
-            let bytes = std::fs::read(&partial).expect("the partial file");
-            Session::recover(&bytes, &partial)
-                .expect("recoverable")
-                .session
-                .records
+            crate::devices::session::records_on_disk(&partial)
                 .iter()
                 .filter(|r| matches!(r, Record::Desktop { .. }))
                 .count()

@@ -699,6 +699,17 @@ fn set_at(r: &mut Record, to: Duration) {
     }
 }
 
+/// The records a recording's `.partial` file holds now, as [`Session::recover`] reads them
+/// (for tests of the writer and the hub).
+#[cfg(test)]
+pub(crate) fn records_on_disk(partial: &Path) -> Vec<Record> {
+    let bytes = std::fs::read(partial).expect("the partial file");
+    Session::recover(&bytes, partial)
+        .expect("recoverable")
+        .session
+        .records
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -894,21 +905,20 @@ mod tests {
         assert_eq!(got.session, whole);
     }
 
+    /// A writer of a desktop session `rec.session` in `dir`, its target and its partial file.
+    fn desktop_writer(dir: &Path) -> (SessionWriter, PathBuf, PathBuf) {
+        let target = dir.join("rec.session");
+        let header = SessionHeader::new(Profile::desktop_default());
+        let w = SessionWriter::create(&target, &header).expect("create");
+        (w, target, dir.join(".rec.session.partial"))
+    }
+
     #[test]
     fn a_killed_recording_keeps_what_came_before_the_last_second() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let target = dir.path().join("rec.session");
-        let header = SessionHeader::new(Profile::desktop_default());
-        let mut w = SessionWriter::create(&target, &header).expect("create");
-        let partial = dir.path().join(".rec.session.partial");
-        let on_disk = || {
-            let bytes = std::fs::read(&partial).expect("the partial file");
-            Session::recover(&bytes, &partial).expect("recoverable")
-        };
-        assert!(
-            on_disk().session.records.is_empty(),
-            "the header is out at once"
-        );
+        let (mut w, target, partial) = desktop_writer(dir.path());
+        let on_disk = || records_on_disk(&partial);
+        assert!(on_disk().is_empty(), "the header is out at once");
         // A small record every 100 ms: far less than the buffer holds, so only the flushes
         // put them on disk.
         let at = |ms: u64| Record::Opened {
@@ -917,7 +927,7 @@ mod tests {
         };
         for ms in (0..=2500).step_by(100) {
             w.write(&at(ms)).expect("write");
-            let kept = on_disk().session.records.len() as u64;
+            let kept = on_disk().len() as u64;
             // Flushed at each whole second of recording time: everything up to the last one is
             // on disk, so every record more than FLUSH_EVERY old is.
             let want = if ms < 1000 { 0 } else { ms / 1000 * 10 + 1 };
@@ -927,26 +937,15 @@ mod tests {
         }
         // Dropping the writer without finishing (an error path) leaves the partial file whole.
         drop(w);
-        let left = on_disk();
-        assert_eq!(left.session.records.len(), 26);
+        assert_eq!(on_disk().len(), 26);
         assert!(!target.exists());
     }
 
     #[test]
     fn records_before_a_silence_reach_the_file_on_the_timer() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let target = dir.path().join("rec.session");
-        let header = SessionHeader::new(Profile::desktop_default());
-        let mut w = SessionWriter::create(&target, &header).expect("create");
-        let partial = dir.path().join(".rec.session.partial");
-        let on_disk = || {
-            let bytes = std::fs::read(&partial).expect("the partial file");
-            Session::recover(&bytes, &partial)
-                .expect("recoverable")
-                .session
-                .records
-                .len()
-        };
+        let (mut w, _, partial) = desktop_writer(dir.path());
+        let on_disk = || records_on_disk(&partial).len();
         for ms in [100, 200, 300] {
             w.write(&Record::Opened {
                 at: Duration::from_millis(ms),
