@@ -547,8 +547,9 @@ impl Shared {
         at
     }
 
-    /// Puts the recording's buffered records on disk if they are [`FLUSH_EVERY`](crate::devices::session::FLUSH_EVERY) old on the
-    /// clock (see [`SessionWriter::flush_if_due`]).
+    /// Puts the recording's buffered records on disk if they are
+    /// [`FLUSH_EVERY`](crate::devices::session::FLUSH_EVERY) old on the clock (see
+    /// [`SessionWriter::flush_if_due`]).
     fn flush_recording(&self) {
         let mut rec = lock(&self.recorder);
         if let Some(w) = rec.as_mut()
@@ -594,7 +595,8 @@ pub struct HubOptions {
 pub struct Hub {
     shared: Arc<Shared>,
     threads: Vec<JoinHandle<()>>,
-    /// The recording's flusher (see [`FLUSH_EVERY`](crate::devices::session::FLUSH_EVERY)), when recording.
+    /// The recording's flusher (see [`FLUSH_EVERY`](crate::devices::session::FLUSH_EVERY)),
+    /// when recording.
     flusher: Option<JoinHandle<()>>,
 }
 
