@@ -63,13 +63,21 @@ fn state() -> (AppState, VirtualClock) {
 
 /// [`state`] with the loaded character changed by `edit` first.
 fn state_with(edit: impl FnOnce(&mut leman::character::Character)) -> (AppState, VirtualClock) {
+    state_for(edit, Profile::desktop_default())
+}
+
+/// [`state_with`] on a replay of an empty session recorded with `profile`.
+fn state_for(
+    edit: impl FnOnce(&mut leman::character::Character),
+    profile: Profile,
+) -> (AppState, VirtualClock) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/characters/torso_16.toml");
     let mut character = setup::load_character(Some(&path)).expect("character");
     edit(&mut character);
     let model = setup::surface_model(&character, IntegratorKind::Verlet);
     assert!(model.is_ok(), "model: {:?}", model.as_ref().err());
     let clock = VirtualClock::new();
-    let session = Session::new(Profile::desktop_default());
+    let session = Session::new(profile);
     let devices = ClockedReplay::new(session, Arc::new(clock.clone())).expect("replay");
     let scheduler = Scheduler::new(
         SchedulerConfig {
@@ -331,6 +339,39 @@ fn the_devices_panel_lists_the_roles_after_a_frame_and_tools_say_they_are_not_bu
     let sphere = h.get_by_label("Sphere");
     assert!(sphere.accesskit_node().is_disabled());
     assert!(!h.get_by_label("Navigate").accesskit_node().is_disabled());
+}
+
+/// With a SpaceMouse in the profile that never delivers, the keyboard flies in its place and
+/// the devices panel says so; the desktop default's rows say nothing of standing in.
+#[test]
+fn the_devices_panel_shows_the_keyboard_standing_in_for_a_missing_spacemouse() {
+    use leman::devices::enumerate::{HidEntry, match_hid};
+    use leman::devices::spacemouse_hid::VENDOR_3DCONNEXION;
+    let (vendor_id, product_id) = (VENDOR_3DCONNEXION, 0xC635);
+    let matched = match_hid(vendor_id, product_id).expect("a supported model");
+    let spacemouse = HidEntry {
+        vendor_id,
+        product_id,
+        serial: None,
+        manufacturer: None,
+        product: None,
+        interface: 0,
+        path: "hidraw0".into(),
+        supported_model: Some(matched.1.into()),
+        protocol: Some(matched.0),
+    };
+    let found = leman::devices::found::profile_for(&[spacemouse]).profile;
+    // (profile, rows of the desktop's own roles, rows it stands in for)
+    for (profile, own, standing_in) in [(found, 2, 1), (Profile::desktop_default(), 3, 0)] {
+        let (state, clock) = state_for(|_| {}, profile);
+        let mut h = harness(state);
+        let mut renderer = CountingRenderer(0);
+        h.state_mut().run_frame(&clock, &mut renderer);
+        h.run();
+        let rows = |label| h.query_all_by_label(label).count();
+        assert_eq!(rows("desktop (desktop)"), own);
+        assert_eq!(rows("desktop (desktop, standing in)"), standing_in);
+    }
 }
 
 /// A render failure shows in the stereo panel while it lasts (not only in the log) and goes
