@@ -345,21 +345,10 @@ fn the_devices_panel_lists_the_roles_after_a_frame_and_tools_say_they_are_not_bu
 /// the devices panel says so; the desktop default's rows say nothing of standing in.
 #[test]
 fn the_devices_panel_shows_the_keyboard_standing_in_for_a_missing_spacemouse() {
-    use leman::devices::enumerate::{HidEntry, match_hid};
+    use leman::devices::enumerate::HidEntry;
     use leman::devices::spacemouse_hid::VENDOR_3DCONNEXION;
-    let (vendor_id, product_id) = (VENDOR_3DCONNEXION, 0xC635);
-    let matched = match_hid(vendor_id, product_id).expect("a supported model");
-    let spacemouse = HidEntry {
-        vendor_id,
-        product_id,
-        serial: None,
-        manufacturer: None,
-        product: None,
-        interface: 0,
-        path: "hidraw0".into(),
-        supported_model: Some(matched.1.into()),
-        protocol: Some(matched.0),
-    };
+    let spacemouse = HidEntry::new(VENDOR_3DCONNEXION, 0xC635, "hidraw0");
+    assert!(spacemouse.supported_model.is_some(), "a supported model");
     let found = leman::devices::found::profile_for(&[spacemouse]).profile;
     // (profile, rows of the desktop's own roles, rows it stands in for)
     for (profile, own, standing_in) in [(found, 2, 1), (Profile::desktop_default(), 3, 0)] {

@@ -57,6 +57,25 @@ pub struct HidEntry {
     pub protocol: Option<Protocol>,
 }
 
+impl HidEntry {
+    /// An interface of the device `vendor_id:product_id` at `path`, marked from the supported
+    /// table ([`match_hid`]); no serial, manufacturer or product strings, interface 0.
+    pub fn new(vendor_id: u16, product_id: u16, path: impl Into<String>) -> Self {
+        let matched = match_hid(vendor_id, product_id);
+        Self {
+            vendor_id,
+            product_id,
+            serial: None,
+            manufacturer: None,
+            product: None,
+            interface: 0,
+            path: path.into(),
+            supported_model: matched.map(|(_, m)| m.to_string()),
+            protocol: matched.map(|(p, _)| p),
+        }
+    }
+}
+
 /// Everything found.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Default)]
 pub struct DeviceList {
@@ -147,19 +166,12 @@ pub fn list_hid() -> Result<Vec<HidEntry>, String> {
     let api = hidapi::HidApi::new().map_err(|e| e.to_string())?;
     Ok(api
         .device_list()
-        .map(|d| {
-            let matched = match_hid(d.vendor_id(), d.product_id());
-            HidEntry {
-                vendor_id: d.vendor_id(),
-                product_id: d.product_id(),
-                serial: d.serial_number().map(str::to_string),
-                manufacturer: d.manufacturer_string().map(str::to_string),
-                product: d.product_string().map(str::to_string),
-                interface: d.interface_number(),
-                path: d.path().to_string_lossy().into_owned(),
-                supported_model: matched.map(|(_, m)| m.to_string()),
-                protocol: matched.map(|(p, _)| p),
-            }
+        .map(|d| HidEntry {
+            serial: d.serial_number().map(str::to_string),
+            manufacturer: d.manufacturer_string().map(str::to_string),
+            product: d.product_string().map(str::to_string),
+            interface: d.interface_number(),
+            ..HidEntry::new(d.vendor_id(), d.product_id(), d.path().to_string_lossy())
         })
         .collect())
 }
@@ -254,15 +266,9 @@ mod tests {
                 candidates: serial_protocols(),
             }],
             hid: vec![HidEntry {
-                vendor_id: 0x256F,
-                product_id: 0xC635,
-                serial: None,
                 manufacturer: Some("3Dconnexion".into()),
                 product: Some("SpaceMouse Compact".into()),
-                interface: 0,
-                path: "/dev/hidraw0".into(),
-                supported_model: Some("SpaceMouse Compact".into()),
-                protocol: Some(Protocol::SpacemouseHid),
+                ..HidEntry::new(0x256F, 0xC635, "/dev/hidraw0")
             }],
             ..DeviceList::default()
         };

@@ -106,18 +106,11 @@ mod tests {
     use std::path::Path;
 
     fn hid(vendor_id: u16, product_id: u16) -> HidEntry {
-        let matched = match_hid(vendor_id, product_id);
-        HidEntry {
+        HidEntry::new(
             vendor_id,
             product_id,
-            serial: None,
-            manufacturer: None,
-            product: None,
-            interface: 0,
-            path: format!("/dev/hidraw-{vendor_id:04x}-{product_id:04x}"),
-            supported_model: matched.map(|(_, m)| m.to_string()),
-            protocol: matched.map(|(p, _)| p),
-        }
+            format!("/dev/hidraw-{vendor_id:04x}-{product_id:04x}"),
+        )
     }
 
     /// A supported SpaceMouse's ids, from the decoder's own table.
