@@ -16,7 +16,7 @@ use crate::app::vehicle::Vehicle;
 use crate::calibration::CalibrationProfile;
 use crate::character::{Character, Posture, SkeletonPose};
 use crate::clock::{Clock, VirtualClock};
-use crate::devices::hub::{DeviceState, HubSnapshot, RoleSample};
+use crate::devices::hub::{DeviceState, HubSnapshot};
 use crate::devices::profile::Role;
 use crate::devices::replay::DeviceSource;
 use crate::pose::Pose;
@@ -454,13 +454,9 @@ impl AppState {
         self.draw_surface_at(self.shown_time_s);
     }
 
-    fn pose_in_physical(&self, snapshot: &HubSnapshot, sample: &RoleSample) -> Option<Pose> {
-        let pose = sample.pose?;
-        let is_desktop = sample
-            .device
-            .and_then(|d| snapshot.devices.get(d))
-            .is_some_and(|d| d.protocol == "desktop");
-        let physical = if is_desktop {
+    fn pose_in_physical(&self, snapshot: &HubSnapshot, role: Role) -> Option<Pose> {
+        let pose = snapshot.role(role).pose?;
+        let physical = if snapshot.from_desktop(role) {
             pose
         } else {
             self.calibration.tracker.world_from_sensor(&pose)
@@ -485,7 +481,7 @@ impl AppState {
             let usable = !matches!(sample.state, DeviceState::Lost | DeviceState::Stopped)
                 || sample.pose.is_some();
             let pose = if usable {
-                this.pose_in_physical(&snapshot, sample)
+                this.pose_in_physical(&snapshot, role)
             } else {
                 None
             };
@@ -498,19 +494,12 @@ impl AppState {
         let mut wand = timed(Role::Wand, self);
         // Wire trackers: the calibration's filter per role, and the pose carried to the time
         // of this read by the role's predictor. The desktop stand-ins are exact already.
-        let wire = |role: Role| {
-            let sample = snapshot.role(role);
-            sample
-                .device
-                .and_then(|d| snapshot.devices.get(d))
-                .is_none_or(|d| d.protocol != "desktop")
-        };
         for (role, timed, tracker) in [
             (Role::Head, &mut head, &mut self.head_tracker),
             (Role::Wand, &mut wand, &mut self.wand_tracker),
         ] {
             if let Some(t) = timed.as_mut()
-                && wire(role)
+                && !snapshot.from_desktop(role)
             {
                 tracker.offer(t.sampled_at, &t.pose);
                 if let Some(p) = tracker.pose_at(snapshot.now).filter(Pose::is_valid) {

@@ -24,10 +24,9 @@ impl SnapshotFeeder {
     }
 
     /// Feeds the wand's newest sample in `snapshot` if it is new, its device is not lost and it
-    /// is not the desktop mouse standing in for the wand ([`RoleSample::stand_in`]: the mouse
-    /// has no 3D position to touch a corner with); returns what the procedure made of it.
-    ///
-    /// [`RoleSample::stand_in`]: crate::devices::hub::RoleSample::stand_in
+    /// is not the desktop mouse, bound to the wand or standing in for it
+    /// ([`HubSnapshot::from_desktop`]: the mouse has no 3D position to touch a corner with);
+    /// returns what the procedure made of it.
     pub fn feed(
         &mut self,
         procedure: &mut CornerProcedure,
@@ -38,7 +37,10 @@ impl SnapshotFeeder {
         let (Some(at), Some(pose)) = (wand.at, wand.pose) else {
             return None;
         };
-        if wand.state == DeviceState::Lost || wand.stand_in || self.last_at == Some(at) {
+        if wand.state == DeviceState::Lost
+            || snapshot.from_desktop(Role::Wand)
+            || self.last_at == Some(at)
+        {
             return None;
         }
         self.last_at = Some(at);
@@ -138,6 +140,29 @@ mod tests {
         assert_eq!(
             feeder.feed(&mut procedure, &snapshot(false), &frames),
             Some(ProcedureEvent::PressIgnoredTooFewSamples { samples: 1 })
+        );
+    }
+
+    #[test]
+    fn a_wand_bound_to_the_desktop_mouse_touches_no_corner() {
+        use crate::devices::desktop::DesktopEvent;
+        use crate::devices::hub::HubState;
+        use crate::devices::profile::Profile;
+        let mut state = HubState::new(Profile::desktop_default());
+        state.opened(0, Duration::ZERO);
+        let press = DesktopEvent::MouseButton {
+            button: 0,
+            pressed: true,
+        };
+        assert!(state.desktop_event(Duration::from_millis(5), &press));
+        let snapshot = state.snapshot(Duration::from_millis(5));
+        let wand = snapshot.role(Role::Wand);
+        assert!(!wand.stand_in && wand.pose.is_some() && !wand.pressed.is_empty());
+        let mut procedure = CornerProcedure::new(ProcedureConfig::default());
+        let mut feeder = SnapshotFeeder::new();
+        assert_eq!(
+            feeder.feed(&mut procedure, &snapshot, &TrackerFrames::default()),
+            None
         );
     }
 }

@@ -184,6 +184,18 @@ impl HubSnapshot {
     pub fn role(&self, role: Role) -> &RoleSample {
         &self.roles[role.index()]
     }
+
+    /// Whether `role`'s sample comes from the desktop stand-ins (bound to the desktop device, or
+    /// standing in for a missing one): poses already in the physical (screen) frame, exact, and
+    /// with no 3D position of a hand behind them.
+    pub fn from_desktop(&self, role: Role) -> bool {
+        let sample = self.role(role);
+        sample.stand_in
+            || sample
+                .device
+                .and_then(|d| self.devices.get(d))
+                .is_some_and(|d| d.protocol == "desktop")
+    }
 }
 
 /// A device event with its arrival time and device, as delivered (before the role maps).
