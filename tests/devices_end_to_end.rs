@@ -572,12 +572,14 @@ fn assert_datagrams_in_order(session: &Session) -> usize {
         chunks.windows(2).all(|w| w[0].0 <= w[1].0),
         "times never decrease"
     );
-    let xs: Vec<f64> = chunks
-        .iter()
-        .map(|(_, b)| f64::from_le_bytes(b[..8].try_into().expect("8 bytes")))
-        .collect();
+    let xs: Vec<f64> = chunks.iter().map(|(_, b)| datagram_x(b)).collect();
     assert!(xs.windows(2).all(|w| w[1] > w[0]), "{xs:?}");
     chunks.len()
+}
+
+/// The x of an OpenTrack datagram ([`send_counting_datagrams`] counts in it).
+fn datagram_x(bytes: &[u8]) -> f64 {
+    f64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"))
 }
 
 /// Runs `leman record --recover FROM --out OUT`.
@@ -629,8 +631,7 @@ fn a_killed_recording_is_recovered_up_to_its_last_flush_even_after_a_silence() {
     let sent =
         send_counting_datagrams(port, Duration::from_millis(2500), Duration::from_millis(50));
     let on_disk = || {
-        let bytes = std::fs::read(&partial).expect("read the partial file");
-        Session::recover(&bytes, &partial)
+        Session::recover_file(&partial)
             .expect("the partial file is recoverable while recording")
             .session
     };
@@ -640,11 +641,7 @@ fn a_killed_recording_is_recovered_up_to_its_last_flush_even_after_a_silence() {
     assert!(flushed >= 10, "{flushed} of {sent} datagrams on disk");
     // Then the tracker falls silent: with no record to carry a flush, the recorder's timer
     // puts the last ones on disk within about a second.
-    let last_x = |s: &Session| {
-        s.chunks(0)
-            .last()
-            .map(|(_, b)| f64::from_le_bytes(b[..8].try_into().expect("8 bytes")))
-    };
+    let last_x = |s: &Session| s.chunks(0).last().map(|(_, b)| datagram_x(b));
     let waited = Instant::now();
     while last_x(&on_disk()) != Some(f64::from(sent - 1)) {
         assert!(

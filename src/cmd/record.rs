@@ -78,13 +78,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let started = Instant::now();
     // `seconds_arg` took only finite spans of 0 or more; `try_from` still refuses one too long
-    // for a `Duration` (over about 584 000 years), which then means no limit.
+    // for a `Duration` (over about 584 000 years), which then means no limit (and no status).
     let limit = args
         .seconds
         .and_then(|s| Duration::try_from_secs_f64(s).ok());
-    let every = (args.status_every > 0.0)
-        .then(|| Duration::try_from_secs_f64(args.status_every).ok())
-        .flatten();
+    let every = Duration::try_from_secs_f64(args.status_every)
+        .ok()
+        .filter(|d| !d.is_zero());
     let mut last_status = Instant::now();
     while !stop.load(Ordering::SeqCst) && limit.is_none_or(|l| started.elapsed() < l) {
         std::thread::sleep(Duration::from_millis(20));

@@ -365,12 +365,17 @@ struct Reading {
     last_at: Duration,
 }
 
-/// The bytes of the file at `path`; an error names it.
-fn read_file(path: &Path) -> Result<Vec<u8>, SessionError> {
-    std::fs::read(path).map_err(|source| SessionError::Io {
+/// Turns an I/O error on the file at `path` into a [`SessionError::Io`] naming it.
+fn io_at(path: &Path) -> impl Fn(std::io::Error) -> SessionError + '_ {
+    move |source| SessionError::Io {
         path: path.to_path_buf(),
         source,
-    })
+    }
+}
+
+/// The bytes of the file at `path`; an error names it.
+fn read_file(path: &Path) -> Result<Vec<u8>, SessionError> {
+    std::fs::read(path).map_err(io_at(path))
 }
 
 /// `error` with a pointer to `leman record --recover`, for a file cut short after its header.
@@ -586,10 +591,7 @@ impl std::fmt::Debug for SessionWriter {
 impl SessionWriter {
     /// Starts a session file at `target` with `header`.
     pub fn create(target: &Path, header: &SessionHeader) -> Result<Self, SessionError> {
-        let io = |source| SessionError::Io {
-            path: target.to_path_buf(),
-            source,
-        };
+        let io = io_at(target);
         let dir = match target.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),
@@ -601,12 +603,12 @@ impl SessionWriter {
         partial_name.push(name);
         partial_name.push(".partial");
         let partial = dir.join(partial_name);
-        let file = std::fs::File::create(&partial).map_err(io)?;
+        let file = std::fs::File::create(&partial).map_err(&io)?;
         let mut file = std::io::BufWriter::new(file);
         // The header goes out at once: without it nothing of a killed recording is recoverable.
         file.write_all(Session::header_text(header).as_bytes())
             .and_then(|()| file.flush())
-            .map_err(io)?;
+            .map_err(&io)?;
         Ok(Self {
             file,
             partial,
@@ -634,10 +636,7 @@ impl SessionWriter {
         }
         self.file
             .write_all(self.line.as_bytes())
-            .map_err(|source| SessionError::Io {
-                path: self.partial.clone(),
-                source,
-            })?;
+            .map_err(io_at(&self.partial))?;
         self.count += 1;
         self.unflushed += 1;
         self.flush_if_due(self.last_at)
@@ -652,10 +651,7 @@ impl SessionWriter {
         if self.unflushed == 0 || now.saturating_sub(self.flushed_at) < FLUSH_EVERY {
             return Ok(());
         }
-        self.file.flush().map_err(|source| SessionError::Io {
-            path: self.partial.clone(),
-            source,
-        })?;
+        self.file.flush().map_err(io_at(&self.partial))?;
         self.flushed_at = now;
         self.unflushed = 0;
         Ok(())
@@ -669,19 +665,12 @@ impl SessionWriter {
     /// Writes the `end` line, syncs and renames the file into place, then syncs the folder
     /// ([`crate::files::sync_dir`]); returns the target path.
     pub fn finish(mut self) -> Result<PathBuf, SessionError> {
-        let partial = self.partial.clone();
-        let io = |source| SessionError::Io {
-            path: partial.clone(),
-            source,
-        };
-        writeln!(self.file, "end {}", self.count).map_err(io)?;
+        let io = io_at(&self.partial);
+        writeln!(self.file, "end {}", self.count).map_err(&io)?;
         let file = self.file.into_inner().map_err(|e| io(e.into_error()))?;
-        file.sync_all().map_err(io)?;
+        file.sync_all().map_err(&io)?;
         drop(file);
-        std::fs::rename(&self.partial, &self.target).map_err(|source| SessionError::Io {
-            path: self.target.clone(),
-            source,
-        })?;
+        std::fs::rename(&self.partial, &self.target).map_err(io_at(&self.target))?;
         if let Some(dir) = self.partial.parent() {
             crate::files::sync_dir(dir);
         }
@@ -703,9 +692,8 @@ fn set_at(r: &mut Record, to: Duration) {
 /// (for tests of the writer and the hub).
 #[cfg(test)]
 pub(crate) fn records_on_disk(partial: &Path) -> Vec<Record> {
-    let bytes = std::fs::read(partial).expect("the partial file");
-    Session::recover(&bytes, partial)
-        .expect("recoverable")
+    Session::recover_file(partial)
+        .expect("a recoverable partial file")
         .session
         .records
 }
