@@ -768,12 +768,14 @@ fn record_command_refuses_spans_that_are_not_seconds() {
     let dir = tempfile::tempdir().expect("tempdir");
     let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/desktop.toml");
     // Each used to be taken as "no limit": the recording ran until Ctrl-C.
-    for (flag, value) in [
-        ("--seconds", "-1"),
-        ("--seconds", "nan"),
-        ("--seconds", "inf"),
-        ("--seconds", "ten"),
-        ("--status-every", "-2"),
+    let nan = "not a number of seconds";
+    for (flag, value, why) in [
+        ("--seconds", "-1", nan),
+        ("--seconds", "nan", nan),
+        ("--seconds", "inf", nan),
+        ("--seconds", "ten", nan),
+        ("--seconds", "1e300", "too long a span"),
+        ("--status-every", "-2", nan),
     ] {
         let mut run = Recorder(
             leman()
@@ -803,7 +805,7 @@ fn record_command_refuses_spans_that_are_not_seconds() {
         std::io::Read::read_to_string(run.0.stderr.as_mut().expect("piped stderr"), &mut err)
             .expect("read stderr");
         assert!(
-            err.contains(flag) && err.contains("not a number of seconds"),
+            err.contains(flag) && err.contains(why),
             "{flag} {value}: {err}"
         );
     }
@@ -812,6 +814,92 @@ fn record_command_refuses_spans_that_are_not_seconds() {
         0,
         "nothing recorded"
     );
+}
+
+/// Runs `leman record` of the desktop profile into `out` for a moment, with `extra` arguments.
+fn record_desktop_briefly(out: &Path, extra: &[&str]) -> std::process::Output {
+    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/desktop.toml");
+    leman()
+        .args(["record", "--profile"])
+        .arg(&profile)
+        .arg("--out")
+        .arg(out)
+        .args(["--seconds", "0.2", "--status-every", "0"])
+        .args(extra)
+        .output()
+        .expect("run leman record")
+}
+
+#[test]
+fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("take.session");
+    let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    let first = record_desktop_briefly(&out, &[]);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let take_one = std::fs::read(&out).expect("first take");
+    let first_take = Session::load(&out).expect("the first take loads");
+
+    // The same command again is refused before anything opens; the first take stays.
+    let again = record_desktop_briefly(&out, &[]);
+    assert!(!again.status.success());
+    let err = stderr(&again);
+    assert!(
+        err.contains("take.session")
+            && err.contains("already exists")
+            && err.contains("--overwrite"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&out).expect("reread"), take_one);
+    // With --overwrite it is replaced by a new whole session.
+    let replaced = record_desktop_briefly(&out, &["--overwrite"]);
+    assert!(replaced.status.success(), "{}", stderr(&replaced));
+    Session::load(&out).expect("the new take loads");
+
+    // A cut-short recording's partial file is never started over, even with --overwrite: it
+    // may be all there is of a take.
+    std::fs::remove_file(&out).expect("remove the take");
+    let partial = dir.path().join(".take.session.partial");
+    // The take without its `end` line, as a killed recording leaves it.
+    let end_line = take_one[..take_one.len() - 1]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .expect("an end line")
+        + 1;
+    let cut = &take_one[..end_line];
+    std::fs::write(&partial, cut).expect("write partial");
+    for extra in [&[][..], &["--overwrite"][..]] {
+        let refused = record_desktop_briefly(&out, extra);
+        assert!(!refused.status.success());
+        let err = stderr(&refused);
+        assert!(
+            err.contains(".take.session.partial") && err.contains("--recover"),
+            "{extra:?}: {err}"
+        );
+        assert_eq!(std::fs::read(&partial).expect("reread"), cut);
+        assert!(!out.exists());
+    }
+    std::fs::write(&out, &take_one).expect("put the take back");
+
+    // Recovering into an existing file is refused too, and done with --overwrite.
+    let recovered = record_recover(&partial, &out);
+    assert!(!recovered.status.success());
+    assert!(
+        stderr(&recovered).contains("already exists"),
+        "{}",
+        stderr(&recovered)
+    );
+    let recovered = leman()
+        .args(["record", "--overwrite", "--recover"])
+        .arg(&partial)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("run leman record --recover");
+    assert!(recovered.status.success(), "{}", stderr(&recovered));
+    let kept = Session::load(&out).expect("the recovered take loads");
+    assert_eq!(kept.header, first_take.header);
+    assert_eq!(kept.records, first_take.records);
 }
 
 #[test]

@@ -30,16 +30,36 @@ pub struct Args {
     /// the first fault to `--out` as a whole session. The file read is left as it is.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["profile", "seconds"])]
     pub recover: Option<PathBuf>,
+    /// Replace `--out` if it exists (without this, an existing file is refused before any
+    /// device opens, so an earlier recording is never lost to a repeated command).
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
-/// A span of seconds on the command line: finite and not negative (a NaN or negative
-/// `--seconds` used to be taken as "no limit" and recorded until Ctrl-C).
+/// A span of seconds on the command line: finite, not negative and short enough for a
+/// `Duration` (a NaN or negative `--seconds` used to be taken as "no limit" and recorded until
+/// Ctrl-C; one over about 584 000 years did the same).
 fn seconds_arg(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {
-        Ok(s) if s.is_finite() && s >= 0.0 => Ok(s),
+        Ok(s) if s.is_finite() && s >= 0.0 && Duration::try_from_secs_f64(s).is_ok() => Ok(s),
+        Ok(s) if s.is_finite() && s >= 0.0 => Err(format!("{s} seconds is too long a span")),
         Ok(s) => Err(format!("{s} is not a number of seconds (need 0 or more)")),
         Err(e) => Err(format!("{text:?} is not a number of seconds: {e}")),
     }
+}
+
+/// Refuses an existing `--out` unless `--overwrite` was given.
+fn refuse_existing(out: &Path, overwrite: bool) -> anyhow::Result<()> {
+    let exists = out
+        .try_exists()
+        .with_context(|| format!("cannot tell whether --out {} exists", out.display()))?;
+    if exists && !overwrite {
+        anyhow::bail!(
+            "--out {} already exists: name a new file, or add --overwrite to replace it",
+            out.display()
+        );
+    }
+    Ok(())
 }
 
 /// Runs `leman record`.
@@ -49,12 +69,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .out
             .as_deref()
             .context("--out SESSION is required: where to write what --recover keeps")?;
-        return recover(from, out);
+        return recover(from, out, args.overwrite);
     }
     let profile_path = args
         .profile
         .context("--profile FILE is required (see devices/*.toml)")?;
     let out = args.out.context("--out SESSION is required")?;
+    refuse_existing(&out, args.overwrite)?;
     let profile = Profile::load(&profile_path)?;
     let stop = Arc::new(AtomicBool::new(false));
     {
@@ -77,8 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_default()
     );
     let started = Instant::now();
-    // `seconds_arg` took only finite spans of 0 or more; `try_from` still refuses one too long
-    // for a `Duration` (over about 584 000 years), which then means no limit (and no status).
+    // `seconds_arg` took only spans a `Duration` holds.
     let limit = args
         .seconds
         .and_then(|s| Duration::try_from_secs_f64(s).ok());
@@ -113,8 +133,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `leman record --recover FROM --out OUT`: writes what can be read of `FROM` to `OUT`.
-fn recover(from: &Path, out: &Path) -> anyhow::Result<()> {
+/// `leman record --recover FROM --out OUT`: writes what can be read of `FROM` to `OUT` (an
+/// existing `OUT` only with `overwrite`, and never `FROM` itself).
+fn recover(from: &Path, out: &Path, overwrite: bool) -> anyhow::Result<()> {
     let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,
@@ -126,6 +147,7 @@ fn recover(from: &Path, out: &Path) -> anyhow::Result<()> {
             out.display()
         );
     }
+    refuse_existing(out, overwrite)?;
     let recovered = Session::recover_file(from)?;
     recovered.session.save(out)?;
     let session = &recovered.session;

@@ -181,6 +181,20 @@ pub enum SessionError {
         /// What is wrong.
         message: String,
     },
+    /// A recording's `.NAME.partial` file is already there: a recording to the same target
+    /// was cut short (and holds records not yet recovered) or is still running. It is never
+    /// written over.
+    #[error(
+        "session {target}: {partial} already exists: a recording to this file was cut short or \
+         is still running; keep what it holds with `leman record --recover {partial} --out \
+         NEW.session`, or remove it"
+    )]
+    PartialExists {
+        /// The session file the new recording was to make.
+        target: PathBuf,
+        /// The partial file found beside it.
+        partial: PathBuf,
+    },
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -589,7 +603,9 @@ impl std::fmt::Debug for SessionWriter {
 }
 
 impl SessionWriter {
-    /// Starts a session file at `target` with `header`.
+    /// Starts a session file at `target` with `header`, writing into `.NAME.partial` beside
+    /// it. Refuses ([`SessionError::PartialExists`]) when that partial file is already there:
+    /// it is either the only copy of a recording that was cut short, or another recorder's.
     pub fn create(target: &Path, header: &SessionHeader) -> Result<Self, SessionError> {
         let io = io_at(target);
         let dir = match target.parent() {
@@ -603,7 +619,17 @@ impl SessionWriter {
         partial_name.push(name);
         partial_name.push(".partial");
         let partial = dir.join(partial_name);
-        let file = std::fs::File::create(&partial).map_err(&io)?;
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&partial)
+            .map_err(|e| match e.kind() {
+                std::io::ErrorKind::AlreadyExists => SessionError::PartialExists {
+                    target: target.to_path_buf(),
+                    partial: partial.clone(),
+                },
+                _ => io(e),
+            })?;
         let mut file = std::io::BufWriter::new(file);
         // The header goes out at once: without it nothing of a killed recording is recoverable.
         file.write_all(Session::header_text(header).as_bytes())
@@ -927,6 +953,22 @@ mod tests {
         drop(w);
         assert_eq!(on_disk().len(), 26);
         assert!(!target.exists());
+        // A new recording to the same file refuses to start over it, naming it and the way to
+        // recover it, and leaves it as it was.
+        let before = std::fs::read(&partial).expect("read partial");
+        let err = SessionWriter::create(&target, &SessionHeader::new(Profile::desktop_default()))
+            .expect_err("a partial file is never written over");
+        assert!(matches!(&err, SessionError::PartialExists { partial: p, .. } if *p == partial));
+        let text = err.to_string();
+        assert!(
+            text.contains(".rec.session.partial") && text.contains("--recover"),
+            "{text}"
+        );
+        assert_eq!(std::fs::read(&partial).expect("read partial"), before);
+        // Once it is recovered elsewhere and removed, the name records again.
+        std::fs::remove_file(&partial).expect("remove");
+        desktop_writer(dir.path()).0.finish().expect("finish");
+        assert!(target.exists());
     }
 
     #[test]
