@@ -1,6 +1,6 @@
 //! The devices `leman run` uses when no profile is given: the desktop stand-ins
 //! ([`Profile::desktop_default`]), with a supported 3D mouse that is plugged in flying the view
-//! instead of the keyboard.
+//! (the keys fly beside it: [`crate::devices::hub::RoleSample::axes`]).
 //!
 //! Only a 3Dconnexion HID SpaceMouse can be taken up this way: it is identified by its USB ids
 //! and needs no settings. A serial tracker or 3D mouse cannot be identified from its port (see
@@ -91,8 +91,8 @@ pub fn profile_for(hid: &[HidEntry]) -> FoundProfile {
     FoundProfile {
         profile,
         summary: format!(
-            "devices: {model} ({:04x}:{:04x}) flies the view, the desktop mouse is the wand \
-             (--profile devices/desktop.toml flies with the keyboard instead)",
+            "devices: {model} ({:04x}:{:04x}) flies the view beside the keyboard, the desktop \
+             mouse is the wand",
             entry.vendor_id, entry.product_id
         ),
     }

@@ -99,7 +99,9 @@ pub struct RoleSample {
     /// Newest pose, after the profile's axis maps (pose roles).
     pub pose: Option<Pose>,
     /// Newest six axes after the maps (axes roles); zero until data arrives, and zero while
-    /// the device is lost (so a lost controller does not keep flying the vehicle).
+    /// the device is lost (so a lost controller does not keep flying the vehicle). With a
+    /// desktop device in the profile, the navigation keys' axes are added to a working
+    /// controller's (see `stand_in` for one that is not working).
     pub axes: [f32; 6],
     /// Buttons held (0-based); empty while the device is lost.
     pub pressed: Vec<u8>,
@@ -149,6 +151,20 @@ impl RoleSample {
             }
             _ => {}
         }
+    }
+
+    /// Adds the desktop stand-in's axes (the navigation keys) to this axes role's own, so the
+    /// keys fly beside a working controller (a SpaceMouse that is found is taken up by default,
+    /// and its user should not lose the keys for it). Nothing changes while no key is held; the
+    /// sum goes on to the vehicle, which clamps each axis to [-1, 1].
+    fn add_desktop_axes(&mut self, desktop: &RoleSample) {
+        if desktop.axes.iter().all(|a| *a == 0.0) {
+            return;
+        }
+        for (own, key) in self.axes.iter_mut().zip(desktop.axes) {
+            *own += key;
+        }
+        self.at = self.at.max(desktop.at);
     }
 }
 
@@ -444,16 +460,20 @@ impl HubState {
             if let Some(stand_ins) = &self.stand_ins
                 && takes_stand_in(r.role)
                 && r.device != Some(stand_ins.device)
-                && matches!(r.state, DeviceState::Lost | DeviceState::Opening)
             {
-                let desktop_state = self
-                    .devices
-                    .get(stand_ins.device)
-                    .map_or(DeviceState::Lost, |s| s.state);
-                *r = RoleSample {
-                    state: desktop_state,
-                    ..stand_ins.roles[r.role.index()].clone()
-                };
+                let desktop = &stand_ins.roles[r.role.index()];
+                if matches!(r.state, DeviceState::Lost | DeviceState::Opening) {
+                    let desktop_state = self
+                        .devices
+                        .get(stand_ins.device)
+                        .map_or(DeviceState::Lost, |s| s.state);
+                    *r = RoleSample {
+                        state: desktop_state,
+                        ..desktop.clone()
+                    };
+                } else if axes_role {
+                    r.add_desktop_axes(desktop);
+                }
             }
         }
         HubSnapshot {
@@ -1254,10 +1274,11 @@ mod tests {
         assert_eq!(wand.pose.expect("tracked wand").position_m.x, -0.2);
         assert_eq!(
             nav.axes,
-            [0.0, 0.0, 0.0, 0.0, 0.5, 0.0],
-            "the SpaceMouse's, not W's"
+            [0.0, 0.0, -1.0, 0.0, 0.5, 0.0],
+            "the SpaceMouse's turn, and W still held flies beside it"
         );
-        // Both unplugged: the stand-ins again, with what the mouse and keyboard did meanwhile.
+        assert_eq!(nav.at, Some(ms(50)));
+        // W let go: the SpaceMouse's alone.
         state.desktop_event(
             ms(70),
             &DesktopEvent::Key {
@@ -1265,6 +1286,34 @@ mod tests {
                 pressed: false,
             },
         );
+        let nav = state.snapshot(ms(75)).roles[Role::Navigation.index()].clone();
+        assert!(!nav.stand_in);
+        assert_eq!(nav.axes, [0.0, 0.0, 0.0, 0.0, 0.5, 0.0]);
+        // A key alone while the SpaceMouse rests (it sends nothing then) still flies, from the
+        // key's time.
+        let rest = DeviceEvent::Axes(crate::devices::sample::AxesSample {
+            raw: [0; 6],
+            value: [0.0; 6],
+        });
+        state.chunk(2, ms(74), 13, &[rest]);
+        state.desktop_event(
+            ms(76),
+            &DesktopEvent::Key {
+                name: "S".into(),
+                pressed: true,
+            },
+        );
+        let nav = state.snapshot(ms(77)).roles[Role::Navigation.index()].clone();
+        assert_eq!(nav.axes, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0], "S backs off");
+        assert_eq!(nav.at, Some(ms(76)));
+        state.desktop_event(
+            ms(78),
+            &DesktopEvent::Key {
+                name: "S".into(),
+                pressed: false,
+            },
+        );
+        // Both unplugged: the stand-ins again, with what the mouse and keyboard did meanwhile.
         state.lost(1, ms(80), "unplugged");
         state.lost(2, ms(80), "unplugged");
         let snap = state.snapshot(ms(90));
