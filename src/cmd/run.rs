@@ -25,8 +25,8 @@ pub struct Args {
     /// Character file (default: assets/characters/torso.toml).
     #[arg(long)]
     pub character: Option<PathBuf>,
-    /// Device profile (TOML); default: the desktop mouse and keyboard, with a plugged-in
-    /// SpaceMouse (USB HID) flying the view.
+    /// Device profile (TOML); default: the desktop mouse and keyboard, with any supported
+    /// SpaceMouse (USB HID) flying the view while it is plugged in.
     #[arg(long)]
     pub profile: Option<PathBuf>,
     /// Calibration profile (default: the built-in desktop).

@@ -1,6 +1,6 @@
 //! The devices `leman run` uses when no profile is given: the desktop stand-ins
-//! ([`Profile::desktop_default`]), with a supported 3D mouse that is plugged in flying the view
-//! (the keys fly beside it: [`crate::devices::hub::RoleSample::axes`]).
+//! ([`Profile::desktop_default`]), with a supported 3D mouse flying the view whenever one is
+//! plugged in (the keys fly beside it: [`crate::devices::hub::RoleSample::axes`]).
 //!
 //! Only a 3Dconnexion HID SpaceMouse can be taken up this way: it is identified by its USB ids
 //! and needs no settings. A serial tracker or 3D mouse cannot be identified from its port (see
@@ -25,37 +25,29 @@ const SPACEMOUSE_DEAD_ZONE: f32 = 0.05;
 /// untouched, which is not a fault.
 const SPACEMOUSE_STALE_AFTER_S: f64 = 3600.0;
 
-/// The default profile for what is plugged in, and a line saying what it uses.
+/// The default profile and a line saying what is plugged in now.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FoundProfile {
-    /// The profile: the desktop stand-ins, navigation from a found SpaceMouse.
+    /// The profile: the desktop stand-ins, navigation on any supported SpaceMouse.
     pub profile: Profile,
-    /// What the profile uses, for the user (one line).
+    /// What the profile finds at start, for the user (one line).
     pub summary: String,
 }
 
-/// The default profile for the HID devices `hid` (from [`crate::devices::enumerate::list_hid`]):
-/// [`Profile::desktop_default`] when none is a supported SpaceMouse; otherwise the same with the
-/// navigation role taken by the first one found (any supported model is opened, so a different
-/// one plugged in later works too).
+/// The default profile, with a summary of the HID devices `hid` (from
+/// [`crate::devices::enumerate::list_hid`]): [`Profile::desktop_default`] with the navigation
+/// role on any supported SpaceMouse, whether or not one is plugged in now. The hub opens one
+/// when it appears (its reopening backoff, at most `reconnect_max_s` apart), and until then
+/// the keyboard stands in for it ([`crate::devices::hub::RoleSample::stand_in`]); the keys fly
+/// beside it once it works. So a SpaceMouse plugged in while the workstation runs is taken up
+/// too, and one unplugged and plugged back in again.
 pub fn profile_for(hid: &[HidEntry]) -> FoundProfile {
     let mut profile = Profile::desktop_default();
-    let Some((entry, model)) = hid
-        .iter()
-        .find_map(|h| h.supported_model.as_deref().map(|m| (h, m)))
-    else {
-        return FoundProfile {
-            profile,
-            summary: "devices: the desktop mouse and keyboard (no supported 3D mouse found; \
-                      trackers need --profile)"
-                .into(),
-        };
-    };
     profile.name = "desktop+spacemouse".into();
-    profile.description = format!(
-        "Found at start: a {model} flies the view; the mouse is the wand and the head sits \
-         0.6 m in front of the screen centre."
-    );
+    profile.description = "The desktop stand-ins, with any supported SpaceMouse flying the view \
+                           beside the keyboard once it is plugged in; the mouse is the wand and \
+                           the head sits 0.6 m in front of the screen centre."
+        .into();
     profile.devices.push(DeviceSpec {
         name: SPACEMOUSE_DEVICE.into(),
         protocol: DeviceKind::Wire(Protocol::SpacemouseHid),
@@ -88,14 +80,20 @@ pub fn profile_for(hid: &[HidEntry]) -> FoundProfile {
             rz: zone,
         };
     }
-    FoundProfile {
-        profile,
-        summary: format!(
+    let plugged_in = hid
+        .iter()
+        .find_map(|h| h.supported_model.as_deref().map(|m| (h, m)));
+    let summary = match plugged_in {
+        Some((entry, model)) => format!(
             "devices: {model} ({:04x}:{:04x}) flies the view beside the keyboard, the desktop \
              mouse is the wand",
             entry.vendor_id, entry.product_id
         ),
-    }
+        None => "devices: the desktop mouse and keyboard; no supported 3D mouse is plugged in \
+                 (a SpaceMouse plugged in later flies the view; trackers need --profile)"
+            .into(),
+    };
+    FoundProfile { profile, summary }
 }
 
 #[cfg(test)]
@@ -122,12 +120,16 @@ mod tests {
     }
 
     #[test]
-    fn nothing_supported_plugged_in_is_the_desktop_profile() {
+    fn with_nothing_supported_plugged_in_the_profile_waits_for_a_spacemouse() {
+        let (v, p) = supported();
+        let with_one = profile_for(&[hid(v, p)]);
         for found in [vec![], vec![hid(0x1234, 0x5678), hid(0x046d, 0x0001)]] {
             let got = profile_for(&found);
-            assert_eq!(got.profile, Profile::desktop_default());
+            // The same profile as with one plugged in: the hub opens it when it appears.
+            assert_eq!(got.profile, with_one.profile);
             assert!(
-                got.summary.contains("desktop mouse and keyboard"),
+                got.summary.contains("desktop mouse and keyboard")
+                    && got.summary.contains("plugged in later"),
                 "{}",
                 got.summary
             );

@@ -855,7 +855,13 @@ impl Reader {
         let index = self.index;
         let repeated = last_error.as_deref() == Some(error);
         if !repeated {
-            tracing::warn!("device {index}: {error}");
+            let name = lock(&self.shared.state)
+                .profile()
+                .devices
+                .get(index)
+                .map(|d| d.name.clone())
+                .unwrap_or_default();
+            tracing::warn!("device {index} ({name}): {error}");
             *last_error = Some(error.to_string());
         }
         if !repeated || was_opened {
@@ -1190,7 +1196,7 @@ mod tests {
     /// The desktop default with a tracker (device 1) on the head (station 2) and the wand
     /// (station 1), and a SpaceMouse (device 2) flying.
     fn tracked_profile() -> Profile {
-        let mut p = crate::devices::found::profile_for(&[]).profile;
+        let mut p = Profile::desktop_default();
         let mut tracker = p.devices[0].clone();
         tracker.name = "tracker".into();
         tracker.protocol = DeviceKind::Wire(crate::devices::protocol::Protocol::Opentrack);
