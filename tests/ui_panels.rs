@@ -71,13 +71,20 @@ fn state_for(
     edit: impl FnOnce(&mut leman::character::Character),
     profile: Profile,
 ) -> (AppState, VirtualClock) {
+    state_replaying(edit, Session::new(profile))
+}
+
+/// The torso_16 state of [`state_for`], its devices replaying `session`.
+fn state_replaying(
+    edit: impl FnOnce(&mut leman::character::Character),
+    session: Session,
+) -> (AppState, VirtualClock) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/characters/torso_16.toml");
     let mut character = setup::load_character(Some(&path)).expect("character");
     edit(&mut character);
     let model = setup::surface_model(&character, IntegratorKind::Verlet);
     assert!(model.is_ok(), "model: {:?}", model.as_ref().err());
     let clock = VirtualClock::new();
-    let session = Session::new(profile);
     let devices = ClockedReplay::new(session, Arc::new(clock.clone())).expect("replay");
     let scheduler = Scheduler::new(
         SchedulerConfig {
@@ -361,6 +368,44 @@ fn the_devices_panel_shows_the_keyboard_standing_in_for_a_missing_spacemouse() {
         assert_eq!(rows("desktop (desktop)"), own);
         assert_eq!(rows("desktop (desktop, standing in)"), standing_in);
     }
+}
+
+/// A lost device's row says why it is lost (the role's row names only the desktop standing
+/// in for it).
+#[test]
+fn the_devices_panel_says_why_a_device_is_lost() {
+    use leman::devices::session::Record;
+    let found = leman::devices::found::profile_for(&[]).profile;
+    let spacemouse = found
+        .device_index("spacemouse")
+        .expect("a SpaceMouse entry");
+    let error = "cannot open hid any:any: no such HID device is plugged in";
+    let mut session = Session::new(found);
+    session.records.push(Record::Lost {
+        at: Duration::from_millis(5),
+        device: spacemouse,
+        error: error.into(),
+    });
+    let (state, clock) = state_replaying(|_| {}, session);
+    let mut h = harness(state);
+    let mut renderer = CountingRenderer(0);
+    clock.set(Duration::from_millis(20));
+    h.state_mut().run_frame(&clock, &mut renderer);
+    h.run();
+    let line = format!("spacemouse (spacemouse-hid) lost: {error}");
+    assert!(h.query_by_label(&line).is_some(), "no line {line:?}");
+    assert_eq!(
+        h.query_all_by_label("desktop (desktop, standing in)")
+            .count(),
+        1
+    );
+    // Nothing lost, no such line.
+    let (state, clock) = state_for(|_| {}, Profile::desktop_default());
+    let mut h = harness(state);
+    clock.set(Duration::from_millis(20));
+    h.state_mut().run_frame(&clock, &mut renderer);
+    h.run();
+    assert!(h.query_by_label_contains(" lost: ").is_none());
 }
 
 /// A render failure shows in the stereo panel while it lasts (not only in the log) and goes

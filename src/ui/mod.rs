@@ -355,7 +355,8 @@ fn integrator_label(k: IntegratorKind) -> &'static str {
 }
 
 /// Devices: each role's device (the desktop's marked "standing in" while it serves a role
-/// whose own device is lost or opening), state, sample rate and the age of its newest sample.
+/// whose own device is lost or opening), state, sample rate and the age of its newest sample;
+/// then each lost device with the reason.
 pub fn devices_ui(ui: &mut egui::Ui, state: &AppState) {
     let Some(snapshot) = &state.last_snapshot else {
         ui.label("no device snapshot yet");
@@ -393,6 +394,14 @@ pub fn devices_ui(ui: &mut egui::Ui, state: &AppState) {
                 ui.end_row();
             }
         });
+    // Why a device is not serving (the stand-ins' rows name only the desktop).
+    for d in &snapshot.devices {
+        if d.state == DeviceState::Lost
+            && let Some(error) = &d.last_error
+        {
+            ui.label(format!("{} ({}) lost: {error}", d.name, d.protocol));
+        }
+    }
     if snapshot.role(Role::Head).pose.is_none() {
         ui.label("No head pose: viewing from the calibrated position.");
     }
