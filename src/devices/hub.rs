@@ -1422,6 +1422,100 @@ mod tests {
         }
     }
 
+    /// A SpaceMouse held off its centre: a combined report every 2 ms.
+    struct HeldSpaceMouse(Vec<u8>);
+
+    impl Transport for HeldSpaceMouse {
+        fn read(
+            &mut self,
+            buf: &mut [u8],
+        ) -> Result<usize, crate::devices::transport::TransportError> {
+            std::thread::sleep(Duration::from_millis(2));
+            buf[..self.0.len()].copy_from_slice(&self.0);
+            Ok(self.0.len())
+        }
+        fn write(
+            &mut self,
+            _bytes: &[u8],
+        ) -> Result<(), crate::devices::transport::TransportError> {
+            Ok(())
+        }
+        fn describe(&self) -> String {
+            "held spacemouse".into()
+        }
+    }
+
+    #[test]
+    fn the_default_profile_takes_up_a_spacemouse_plugged_in_after_start() {
+        let mut profile = crate::devices::found::profile_for(&[]).profile;
+        let spacemouse = profile
+            .device_index(crate::devices::found::SPACEMOUSE_DEVICE)
+            .expect("a SpaceMouse entry");
+        profile.devices[spacemouse].driver.reconnect_max_s = 0.02;
+        let plugged = Arc::new(AtomicBool::new(false));
+        let tries = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let opener: Box<dyn Opener> = Box::new(FnOpener::new("spacemouse", {
+            let (plugged, tries) = (Arc::clone(&plugged), Arc::clone(&tries));
+            move || {
+                tries.fetch_add(1, Ordering::SeqCst);
+                if !plugged.load(Ordering::SeqCst) {
+                    return Err(crate::devices::transport::TransportError::Open {
+                        what: "hid any:any".into(),
+                        message: "no such HID device is plugged in".into(),
+                    });
+                }
+                let report =
+                    crate::devices::encode::spacemouse_hid::combined_report([0, 0, 0, 0, 300, 0]);
+                Ok(Box::new(HeldSpaceMouse(report)) as Box<dyn Transport>)
+            }
+        }));
+        let mut openers: Openers = profile.devices.iter().map(|_| None).collect();
+        openers[spacemouse] = Some(opener);
+        let hub = Hub::start_with(
+            profile,
+            openers,
+            Arc::new(crate::clock::RealClock::new()),
+            HubOptions::default(),
+        )
+        .expect("hub");
+        let key = |pressed| DesktopEvent::Key {
+            name: "W".into(),
+            pressed,
+        };
+        hub.feed_desktop(key(true));
+        let w = [0.0, 0.0, -1.0, 0.0, 0.0, 0.0];
+        // Not plugged in: lost (and tried again and again), and the keys fly in its place.
+        let snap = wait_for(&hub, |s| {
+            s.devices[spacemouse].state == DeviceState::Lost
+                && tries.load(Ordering::SeqCst) >= 3
+                && s.role(Role::Navigation).axes == w
+        });
+        assert!(snap.role(Role::Navigation).stand_in);
+        assert!(
+            snap.devices[spacemouse]
+                .last_error
+                .as_deref()
+                .is_some_and(|e| e.contains("no such HID device is plugged in")),
+            "{snap:#?}"
+        );
+        // Plugged in: opened at the next try, its axes fly with W's added.
+        plugged.store(true, Ordering::SeqCst);
+        let snap = wait_for(&hub, |s| {
+            s.devices[spacemouse].state == DeviceState::Running
+                && s.role(Role::Navigation).axes != w
+        });
+        let with_w = snap.role(Role::Navigation).axes;
+        assert!(!snap.role(Role::Navigation).stand_in);
+        hub.feed_desktop(key(false));
+        let snap = wait_for(&hub, |s| s.role(Role::Navigation).axes[2] != -1.0);
+        let own = snap.role(Role::Navigation).axes;
+        assert_ne!(own, [0.0; 6], "the held cap turns the view");
+        for k in 0..6 {
+            assert_eq!(with_w[k], own[k] + w[k], "axis {k}: {with_w:?} {own:?}");
+        }
+        hub.stop().expect("stop");
+    }
+
     #[test]
     fn a_device_that_never_answers_is_lost_on_every_attempt_and_recorded_so() {
         let dir = tempfile::tempdir().expect("tempdir");
