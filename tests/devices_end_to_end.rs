@@ -816,9 +816,15 @@ fn record_command_refuses_spans_that_are_not_seconds() {
     );
 }
 
-/// Runs `leman record` of the desktop profile into `out` for a moment, with `extra` arguments.
-fn record_desktop_briefly(out: &Path, extra: &[&str]) -> std::process::Output {
-    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/desktop.toml");
+/// Runs `leman record` of an OpenTrack device on a free loopback port into `out` for a moment,
+/// with `extra` arguments (nothing is sent: the session holds the device's opening).
+fn record_briefly(out: &Path, extra: &[&str]) -> std::process::Output {
+    let profile = out.with_extension("toml");
+    std::fs::write(
+        &profile,
+        opentrack_profile("127.0.0.1:0").to_toml().expect("toml"),
+    )
+    .expect("write profile");
     leman()
         .args(["record", "--profile"])
         .arg(&profile)
@@ -835,13 +841,13 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join("take.session");
     let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
-    let first = record_desktop_briefly(&out, &[]);
+    let first = record_briefly(&out, &[]);
     assert!(first.status.success(), "{}", stderr(&first));
     let take_one = std::fs::read(&out).expect("first take");
     let first_take = Session::load(&out).expect("the first take loads");
 
     // The same command again is refused before anything opens; the first take stays.
-    let again = record_desktop_briefly(&out, &[]);
+    let again = record_briefly(&out, &[]);
     assert!(!again.status.success());
     let err = stderr(&again);
     assert!(
@@ -852,7 +858,7 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
     );
     assert_eq!(std::fs::read(&out).expect("reread"), take_one);
     // With --overwrite it is replaced by a new whole session.
-    let replaced = record_desktop_briefly(&out, &["--overwrite"]);
+    let replaced = record_briefly(&out, &["--overwrite"]);
     assert!(replaced.status.success(), "{}", stderr(&replaced));
     Session::load(&out).expect("the new take loads");
 
@@ -869,7 +875,7 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
     let cut = &take_one[..end_line];
     std::fs::write(&partial, cut).expect("write partial");
     for extra in [&[][..], &["--overwrite"][..]] {
-        let refused = record_desktop_briefly(&out, extra);
+        let refused = record_briefly(&out, extra);
         assert!(!refused.status.success());
         let err = stderr(&refused);
         assert!(
@@ -900,6 +906,31 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
     let kept = Session::load(&out).expect("the recovered take loads");
     assert_eq!(kept.header, first_take.header);
     assert_eq!(kept.records, first_take.records);
+}
+
+#[test]
+fn record_refuses_a_profile_of_only_the_desktop_stand_ins() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/desktop.toml");
+    let run = leman()
+        .args(["record", "--profile"])
+        .arg(&profile)
+        .arg("--out")
+        .arg(dir.path().join("d.session"))
+        .args(["--seconds", "0.2"])
+        .output()
+        .expect("run leman record");
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("desktop.toml") && err.contains("opens no window"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_dir(dir.path()).expect("list").count(),
+        0,
+        "nothing written"
+    );
 }
 
 #[test]

@@ -3,7 +3,7 @@
 use anyhow::Context as _;
 use leman::clock::RealClock;
 use leman::devices::hub::{DeviceState, Hub, HubOptions};
-use leman::devices::profile::Profile;
+use leman::devices::profile::{DeviceKind, Profile};
 use leman::devices::session::Session;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -77,6 +77,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.context("--out SESSION is required")?;
     refuse_existing(&out, args.overwrite)?;
     let profile = Profile::load(&profile_path)?;
+    // The desktop stand-ins take their events from the workstation's window; this command
+    // opens none, so they would record nothing.
+    let desktop: Vec<&str> = profile
+        .devices
+        .iter()
+        .filter(|d| d.protocol == DeviceKind::Desktop)
+        .map(|d| d.name.as_str())
+        .collect();
+    if desktop.len() == profile.devices.len() {
+        anyhow::bail!(
+            "{}: every device is the desktop mouse and keyboard, which `leman record` cannot \
+             record (it opens no window): name a profile with a tracker or a 3D mouse",
+            profile_path.display()
+        );
+    }
+    for name in desktop {
+        eprintln!(
+            "note: device {name:?} (the desktop mouse and keyboard) records nothing here: \
+             `leman record` opens no window"
+        );
+    }
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = Arc::clone(&stop);
