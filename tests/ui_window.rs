@@ -7,7 +7,7 @@
 
 use leman::render::RgbaImage;
 use leman::render::device_caps::gpu_required_by_env;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -48,37 +48,30 @@ fn skin_pixels(image: &RgbaImage) -> usize {
         .count()
 }
 
+/// Starts Xvfb on a display number it picks itself (`-displayfd`: two tests starting one each
+/// at once cannot pick the same one) and returns it with its `DISPLAY` name.
 fn start_xvfb() -> Option<(Killed, String)> {
-    for n in 90..200u32 {
-        let socket = PathBuf::from(format!("/tmp/.X11-unix/X{n}"));
-        let lock = PathBuf::from(format!("/tmp/.X{n}-lock"));
-        if socket.exists() || lock.exists() {
-            continue;
-        }
-        let child = Command::new("Xvfb")
-            .args([
-                &format!(":{n}"),
-                "-screen",
-                "0",
-                "1280x720x24",
-                "-nolisten",
-                "tcp",
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .ok()?;
-        let guard = Killed(child);
-        let start = Instant::now();
-        while start.elapsed() < Duration::from_secs(10) {
-            if socket.exists() {
-                return Some((guard, format!(":{n}")));
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        return None;
-    }
-    None
+    let mut child = Command::new("Xvfb")
+        .args([
+            "-displayfd",
+            "1",
+            "-screen",
+            "0",
+            "1280x720x24",
+            "-nolisten",
+            "tcp",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .ok()?;
+    let stdout = child.stdout.take()?;
+    let guard = Killed(child);
+    // Xvfb writes the number once it accepts connections; a failed start closes the pipe.
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line).ok()?;
+    let n: u32 = line.trim().parse().ok()?;
+    Some((guard, format!(":{n}")))
 }
 
 #[test]
@@ -157,4 +150,93 @@ fn the_leman_window_shows_the_character() {
         "no character on screen after 150 s (best {best} skin pixels); screenshot {}\n{text}",
         keep.display()
     );
+}
+
+/// `leman run --record` writes the live devices (here the desktop stand-ins and the default
+/// profile's absent SpaceMouse) into a whole session when the window closes, which loads and
+/// holds the default profile; the same command again is refused before any window opens.
+#[test]
+fn leman_run_records_its_devices_into_a_session() {
+    use leman::devices::session::{Record, Session};
+    if !have("Xvfb") {
+        skip("`Xvfb` is not installed (apt-get install xvfb)");
+        return;
+    }
+    let Some((_xvfb, display)) = start_xvfb() else {
+        skip("Xvfb did not start");
+        return;
+    };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let runtime = dir.path().join("xdg");
+    std::fs::create_dir_all(&runtime).expect("runtime dir");
+    let out = dir.path().join("desk.session");
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_leman"))
+            .current_dir(root)
+            .env("DISPLAY", &display)
+            .env("XDG_RUNTIME_DIR", &runtime)
+            .env_remove("WAYLAND_DISPLAY")
+            .args(["run", "--size", "320x180", "--quit-after-frames", "10"])
+            .arg("--record")
+            .arg(&out)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start leman")
+    };
+    let mut leman = Killed(run());
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = leman.0.try_wait().expect("wait") {
+            break status;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(150),
+            "leman run did not close after 10 frames"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(leman.0.stderr.as_mut().expect("stderr"), &mut err)
+        .expect("read stderr");
+    if !status.success()
+        && (err.contains("NotFound") || err.contains("No suitable") || err.contains("adapter"))
+    {
+        skip(&format!("no GPU for the window: {err}"));
+        return;
+    }
+    assert!(status.success(), "{err}");
+    assert!(err.contains("recorded "), "{err}");
+    let session = Session::load(&out).expect("a whole session");
+    let default = leman::devices::found::profile_for(&[]).profile;
+    assert_eq!(session.header.profile, default);
+    let desktop = default.device_index("desktop").expect("desktop device");
+    assert!(
+        session
+            .records
+            .iter()
+            .any(|r| matches!(r, Record::Opened { device, .. } if *device == desktop)),
+        "{:?}",
+        session.records
+    );
+    let partials = std::fs::read_dir(dir.path())
+        .expect("list")
+        .filter(|e| {
+            e.as_ref()
+                .is_ok_and(|e| e.file_name().to_string_lossy().ends_with(".partial"))
+        })
+        .count();
+    assert_eq!(partials, 0, "the partial file is renamed into place");
+
+    // Again into the same file: refused before a window opens, the session left as it is.
+    let before = std::fs::read(&out).expect("read");
+    let again = run().wait_with_output().expect("run again");
+    assert!(!again.status.success());
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(
+        err.contains("already exists") && err.contains("--overwrite"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&out).expect("reread"), before);
 }

@@ -48,20 +48,6 @@ fn seconds_arg(text: &str) -> Result<f64, String> {
     }
 }
 
-/// Refuses an existing `--out` unless `--overwrite` was given.
-fn refuse_existing(out: &Path, overwrite: bool) -> anyhow::Result<()> {
-    let exists = out
-        .try_exists()
-        .with_context(|| format!("cannot tell whether --out {} exists", out.display()))?;
-    if exists && !overwrite {
-        anyhow::bail!(
-            "--out {} already exists: name a new file, or add --overwrite to replace it",
-            out.display()
-        );
-    }
-    Ok(())
-}
-
 /// Runs `leman record`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(from) = &args.recover {
@@ -75,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .profile
         .context("--profile FILE is required (see devices/*.toml)")?;
     let out = args.out.context("--out SESSION is required")?;
-    refuse_existing(&out, args.overwrite)?;
+    super::refuse_existing("--out", &out, args.overwrite)?;
     let profile = Profile::load(&profile_path)?;
     // The desktop stand-ins take their events from the workstation's window; this command
     // opens none, so they would record nothing.
@@ -88,14 +74,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if desktop.len() == profile.devices.len() {
         anyhow::bail!(
             "{}: every device is the desktop mouse and keyboard, which `leman record` cannot \
-             record (it opens no window): name a profile with a tracker or a 3D mouse",
+             record (it opens no window): name a profile with a tracker or a 3D mouse, or \
+             record with the workstation open (`leman run --record SESSION`)",
             profile_path.display()
         );
     }
     for name in desktop {
         eprintln!(
             "note: device {name:?} (the desktop mouse and keyboard) records nothing here: \
-             `leman record` opens no window"
+             `leman record` opens no window (`leman run --record SESSION` does)"
         );
     }
     let stop = Arc::new(AtomicBool::new(false));
@@ -168,7 +155,7 @@ fn recover(from: &Path, out: &Path, overwrite: bool) -> anyhow::Result<()> {
             out.display()
         );
     }
-    refuse_existing(out, overwrite)?;
+    super::refuse_existing("--out", out, overwrite)?;
     let recovered = Session::recover_file(from)?;
     recovered.session.save(out)?;
     let session = &recovered.session;

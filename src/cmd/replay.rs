@@ -77,6 +77,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ratio: args.ratio,
             adapt: false,
             log: args.log.clone(),
+            record_to: None,
         });
     }
     let log = args

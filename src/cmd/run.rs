@@ -1,6 +1,7 @@
 //! `leman run` (and plain `leman`): opens the workstation window on the default character with
 //! the default calibration and the devices of a profile (when no profile is given, the desktop
-//! mouse and keyboard, with a plugged-in HID SpaceMouse flying the view: `devices::found`).
+//! mouse and keyboard, with a HID SpaceMouse flying the view once plugged in:
+//! `devices::found`), recording them with `--record`.
 
 use anyhow::Context;
 use leman::app::scheduler::{Pacing, Scheduler, SchedulerConfig};
@@ -9,7 +10,8 @@ use leman::app::state::AppState;
 use leman::calibration::CalibrationProfile;
 use leman::character::Character;
 use leman::clock::{RealClock, VirtualClock};
-use leman::devices::hub::{Hub, HubOptions};
+use leman::devices::desktop::DesktopEvent;
+use leman::devices::hub::{Hub, HubOptions, HubSnapshot, TimedEvent};
 use leman::devices::profile::Profile;
 use leman::devices::replay::{ClockedReplay, DeviceSource};
 use leman::devices::session::Session;
@@ -50,6 +52,14 @@ pub struct Args {
     /// Lower and raise the skin resolution to hold the sim/real ratio.
     #[arg(long)]
     pub adapt: bool,
+    /// Record the devices, the mouse and keyboard included, into this session file while the
+    /// window is open (written as `leman record` writes, finished when the window closes;
+    /// play it back with `leman replay`).
+    #[arg(long, value_name = "SESSION")]
+    pub record: Option<PathBuf>,
+    /// Replace `--record` if it exists (without this, an existing file is refused).
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 /// What the window needs.
@@ -70,6 +80,8 @@ pub struct WindowSetup {
     pub adapt: bool,
     /// Where to write the frame log at exit.
     pub log: Option<PathBuf>,
+    /// Where to record the live devices (not with `replay`).
+    pub record_to: Option<PathBuf>,
 }
 
 /// Runs `leman run`.
@@ -80,6 +92,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(s) => setup::parse_stereo_mode(s)?,
         None => StereoMode::Mono,
     };
+    if let Some(path) = &args.record {
+        super::refuse_existing("--record", path, args.overwrite)?;
+    }
     let profile = match &args.profile {
         Some(p) => Profile::load(p)?,
         None => {
@@ -108,6 +123,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ratio: args.ratio,
             adapt: args.adapt,
             log: args.log.clone(),
+            record_to: args.record.clone(),
         },
         size,
         args.quit_after_frames,
@@ -133,12 +149,14 @@ fn run_window_sized(
         ratio,
         adapt,
         log,
+        record_to,
     } = setup;
     let model = setup::surface_model(&character, IntegratorKind::Verlet);
     if let Err(e) = &model {
         eprintln!("warning: the skin will not be simulated: {e}");
     }
     // A replay in the window runs on its own clock, advanced in real time by the frames.
+    let mut recording_hub = None;
     let (devices, replay_clock): (Box<dyn DeviceSource>, Option<VirtualClock>) = match replay {
         Some(session) => {
             let clock = VirtualClock::new();
@@ -147,9 +165,19 @@ fn run_window_sized(
         }
         None => {
             let profile = profile.unwrap_or_else(Profile::desktop_default);
-            let hub = Hub::start(profile, Arc::new(RealClock::new()), HubOptions::default())
-                .context("starting the device hub")?;
-            (Box::new(hub), None)
+            let recording = record_to.is_some();
+            let hub = Hub::start(
+                profile,
+                Arc::new(RealClock::new()),
+                HubOptions { record_to },
+            )
+            .context("starting the device hub")?;
+            let hub = Arc::new(hub);
+            if recording {
+                // Kept here too, to finish the session once the window has closed.
+                recording_hub = Some(Arc::clone(&hub));
+            }
+            (Box::new(SharedHub(hub)), None)
         }
     };
     let config = SchedulerConfig {
@@ -181,5 +209,43 @@ fn run_window_sized(
         }),
     )
     .map_err(|e| anyhow::anyhow!("window: {e}"))?;
+    if let Some(hub) = recording_hub {
+        finish_recording(hub)?;
+    }
+    Ok(())
+}
+
+/// A hub the window reads while `run_window_sized` may keep it too, to finish its recording.
+struct SharedHub(Arc<Hub>);
+
+impl DeviceSource for SharedHub {
+    fn snapshot(&self) -> HubSnapshot {
+        self.0.snapshot()
+    }
+    fn drain_events(&self) -> Vec<TimedEvent> {
+        self.0.drain_events()
+    }
+    fn feed_desktop(&self, event: DesktopEvent) -> bool {
+        self.0.feed_desktop(event)
+    }
+}
+
+/// Stops the recording hub once the window (and with it the app's handle) is gone, writing the
+/// session's end and renaming it into place.
+fn finish_recording(hub: Arc<Hub>) -> anyhow::Result<()> {
+    if let Some(e) = hub.record_error() {
+        anyhow::bail!(
+            "recording failed: {e} (recover what was written with leman record --recover)"
+        );
+    }
+    let hub = Arc::try_unwrap(hub).map_err(|_| {
+        anyhow::anyhow!(
+            "the recording could not be finished: the window still holds the device hub \
+             (recover the .partial file with leman record --recover)"
+        )
+    })?;
+    if let Some(path) = hub.stop()? {
+        eprintln!("recorded {}", path.display());
+    }
     Ok(())
 }
