@@ -931,6 +931,23 @@ fn record_refuses_a_profile_of_only_the_desktop_stand_ins() {
         0,
         "nothing written"
     );
+    // A profile without devices is refused as such.
+    let empty = dir.path().join("empty.toml");
+    std::fs::write(&empty, "version = 1\nname = \"empty\"\n").expect("write");
+    let run = leman()
+        .args(["record", "--profile"])
+        .arg(&empty)
+        .arg("--out")
+        .arg(dir.path().join("e.session"))
+        .output()
+        .expect("run leman record");
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("empty.toml") && err.contains("no devices"),
+        "{err}"
+    );
+    assert!(!dir.path().join("e.session").exists());
 }
 
 #[test]

@@ -71,6 +71,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .filter(|d| d.protocol == DeviceKind::Desktop)
         .map(|d| d.name.as_str())
         .collect();
+    if profile.devices.is_empty() {
+        anyhow::bail!(
+            "{}: the profile has no devices to record",
+            profile_path.display()
+        );
+    }
     if desktop.len() == profile.devices.len() {
         anyhow::bail!(
             "{}: every device is the desktop mouse and keyboard, which `leman record` cannot \
