@@ -74,6 +74,47 @@ fn start_xvfb() -> Option<(Killed, String)> {
     Some((guard, format!(":{n}")))
 }
 
+/// A virtual X display with a private runtime folder, for `leman` windows.
+struct VirtualDisplay {
+    _xvfb: Killed,
+    display: String,
+    dir: tempfile::TempDir,
+}
+
+impl VirtualDisplay {
+    /// Starts one, or says why not (`skip`) and gives `None`.
+    fn start() -> Option<Self> {
+        let Some((xvfb, display)) = start_xvfb() else {
+            skip("Xvfb did not start");
+            return None;
+        };
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir_all(dir.path().join("xdg")).expect("runtime dir");
+        Some(Self {
+            _xvfb: xvfb,
+            display,
+            dir,
+        })
+    }
+
+    /// A scratch folder that lives as long as the display.
+    fn dir(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// `leman ARGS` on this display, from the crate's folder.
+    fn leman(&self, args: &[&str]) -> Command {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_leman"));
+        command
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .env("DISPLAY", &self.display)
+            .env("XDG_RUNTIME_DIR", self.dir().join("xdg"))
+            .env_remove("WAYLAND_DISPLAY")
+            .args(args);
+        command
+    }
+}
+
 #[test]
 fn the_leman_window_shows_the_character() {
     for program in ["Xvfb", "import"] {
@@ -84,28 +125,19 @@ fn the_leman_window_shows_the_character() {
             return;
         }
     }
-    let Some((_xvfb, display)) = start_xvfb() else {
-        skip("Xvfb did not start");
+    let Some(x) = VirtualDisplay::start() else {
         return;
     };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let dir = tempfile::tempdir().expect("tempdir");
-    let runtime = dir.path().join("xdg");
-    std::fs::create_dir_all(&runtime).expect("runtime dir");
-    let log = dir.path().join("leman.log");
+    let log = x.dir().join("leman.log");
     let mut leman = Killed(
-        Command::new(env!("CARGO_BIN_EXE_leman"))
-            .current_dir(root)
-            .env("DISPLAY", &display)
-            .env("XDG_RUNTIME_DIR", &runtime)
-            .env_remove("WAYLAND_DISPLAY")
-            .args(["run", "--size", "1280x720", "--quit-after-frames", "5000"])
+        x.leman(&["run", "--size", "1280x720", "--quit-after-frames", "5000"])
             .stdout(Stdio::null())
             .stderr(std::fs::File::create(&log).expect("log file"))
             .spawn()
             .expect("start leman"),
     );
-    let shot = dir.path().join("shot.png");
+    let shot = x.dir().join("shot.png");
     let keep = root.join("target/ui_window_screenshot.png");
     let start = Instant::now();
     let mut best = 0;
@@ -121,7 +153,7 @@ fn the_leman_window_shows_the_character() {
             panic!("leman exited early ({status}):\n{text}");
         }
         let ok = Command::new("import")
-            .env("DISPLAY", &display)
+            .env("DISPLAY", &x.display)
             .args(["-window", "root"])
             .arg(&shot)
             .status()
@@ -162,22 +194,12 @@ fn leman_run_records_its_devices_into_a_session() {
         skip("`Xvfb` is not installed (apt-get install xvfb)");
         return;
     }
-    let Some((_xvfb, display)) = start_xvfb() else {
-        skip("Xvfb did not start");
+    let Some(x) = VirtualDisplay::start() else {
         return;
     };
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let dir = tempfile::tempdir().expect("tempdir");
-    let runtime = dir.path().join("xdg");
-    std::fs::create_dir_all(&runtime).expect("runtime dir");
-    let out = dir.path().join("desk.session");
+    let out = x.dir().join("desk.session");
     let run = || {
-        Command::new(env!("CARGO_BIN_EXE_leman"))
-            .current_dir(root)
-            .env("DISPLAY", &display)
-            .env("XDG_RUNTIME_DIR", &runtime)
-            .env_remove("WAYLAND_DISPLAY")
-            .args(["run", "--size", "320x180", "--quit-after-frames", "10"])
+        x.leman(&["run", "--size", "320x180", "--quit-after-frames", "10"])
             .arg("--record")
             .arg(&out)
             .stdout(Stdio::null())
@@ -220,7 +242,7 @@ fn leman_run_records_its_devices_into_a_session() {
         "{:?}",
         session.records
     );
-    let partials = std::fs::read_dir(dir.path())
+    let partials = std::fs::read_dir(x.dir())
         .expect("list")
         .filter(|e| {
             e.as_ref()
