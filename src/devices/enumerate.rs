@@ -231,6 +231,12 @@ pub fn format_text(list: &DeviceList) -> String {
             mark
         );
     }
+    if list.hid.iter().any(|h| h.supported_model.is_some()) {
+        let _ = writeln!(
+            s,
+            "  (`leman run` without --profile flies the view with a SUPPORTED one)"
+        );
+    }
     for n in &list.notes {
         let _ = writeln!(s, "note: {n}");
     }
@@ -281,6 +287,14 @@ mod tests {
             text.contains("SUPPORTED: SpaceMouse Compact (spacemouse-hid)"),
             "{text}"
         );
+        assert!(
+            text.contains("`leman run` without --profile flies"),
+            "{text}"
+        );
+        // Only a supported one is said to fly the view.
+        let mut other = list.clone();
+        other.hid[0] = HidEntry::new(0x1234, 0x5678, "/dev/hidraw1");
+        assert!(!format_text(&other).contains("leman run"));
         let json = serde_json::to_value(&list).expect("json");
         assert_eq!(json["hid"][0]["protocol"], "spacemouse-hid");
     }

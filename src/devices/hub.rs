@@ -1451,7 +1451,8 @@ mod tests {
         let spacemouse = profile
             .device_index(crate::devices::found::SPACEMOUSE_DEVICE)
             .expect("a SpaceMouse entry");
-        profile.devices[spacemouse].driver.reconnect_max_s = 0.02;
+        let driver = &mut profile.devices[spacemouse].driver;
+        (driver.reconnect_min_s, driver.reconnect_max_s) = (0.005, 0.02);
         let plugged = Arc::new(AtomicBool::new(false));
         let tries = Arc::new(std::sync::atomic::AtomicUsize::new(0));
         let opener: Box<dyn Opener> = Box::new(FnOpener::new("spacemouse", {
