@@ -352,11 +352,7 @@ fn the_devices_panel_lists_the_roles_after_a_frame_and_tools_say_they_are_not_bu
 /// the devices panel says so; the desktop default's rows say nothing of standing in.
 #[test]
 fn the_devices_panel_shows_the_keyboard_standing_in_for_a_missing_spacemouse() {
-    use leman::devices::enumerate::HidEntry;
-    use leman::devices::spacemouse_hid::VENDOR_3DCONNEXION;
-    let spacemouse = HidEntry::new(VENDOR_3DCONNEXION, 0xC635, "hidraw0");
-    assert!(spacemouse.supported_model.is_some(), "a supported model");
-    let found = leman::devices::found::profile_for(&[spacemouse]).profile;
+    let found = leman::devices::found::default_profile();
     // (profile, rows of the desktop's own roles, rows it stands in for)
     for (profile, own, standing_in) in [(found, 2, 1), (Profile::desktop_default(), 3, 0)] {
         let (state, clock) = state_for(|_| {}, profile);
@@ -375,7 +371,7 @@ fn the_devices_panel_shows_the_keyboard_standing_in_for_a_missing_spacemouse() {
 #[test]
 fn the_devices_panel_says_why_a_device_is_lost() {
     use leman::devices::session::Record;
-    let found = leman::devices::found::profile_for(&[]).profile;
+    let found = leman::devices::found::default_profile();
     let spacemouse = found
         .device_index("spacemouse")
         .expect("a SpaceMouse entry");

@@ -231,7 +231,7 @@ fn leman_run_records_its_devices_into_a_session() {
     assert!(status.success(), "{err}");
     assert!(err.contains("recorded "), "{err}");
     let session = Session::load(&out).expect("a whole session");
-    let default = leman::devices::found::profile_for(&[]).profile;
+    let default = leman::devices::found::default_profile();
     assert_eq!(session.header.profile, default);
     let desktop = default.device_index("desktop").expect("desktop device");
     assert!(

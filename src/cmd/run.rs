@@ -98,15 +98,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let profile = match &args.profile {
         Some(p) => Profile::load(p)?,
         None => {
-            // What is plugged in: a HID 3D mouse is taken up; nothing else can be named without
-            // a profile (leman::devices::found).
+            // The desktop stand-ins and any SpaceMouse, now or later (leman::devices::found);
+            // the listing only tells the user what is there at start.
             let hid = leman::devices::enumerate::list_hid().unwrap_or_else(|e| {
-                eprintln!("warning: cannot list HID devices ({e}); using the desktop stand-ins");
+                eprintln!("warning: cannot list HID devices ({e})");
                 Vec::new()
             });
-            let found = leman::devices::found::profile_for(&hid);
-            eprintln!("{}", found.summary);
-            found.profile
+            eprintln!("{}", leman::devices::found::summary(&hid));
+            leman::devices::found::default_profile()
         }
     };
     let size = match &args.size {

@@ -25,23 +25,14 @@ const SPACEMOUSE_DEAD_ZONE: f32 = 0.05;
 /// untouched, which is not a fault.
 const SPACEMOUSE_STALE_AFTER_S: f64 = 3600.0;
 
-/// The default profile and a line saying what is plugged in now.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FoundProfile {
-    /// The profile: the desktop stand-ins, navigation on any supported SpaceMouse.
-    pub profile: Profile,
-    /// What the profile finds at start, for the user (one line).
-    pub summary: String,
-}
-
-/// The default profile, with a summary of the HID devices `hid` (from
-/// [`crate::devices::enumerate::list_hid`]): [`Profile::desktop_default`] with the navigation
-/// role on any supported SpaceMouse, whether or not one is plugged in now. The hub opens one
-/// when it appears (its reopening backoff, at most `reconnect_max_s` apart), and until then
-/// the keyboard stands in for it ([`crate::devices::hub::RoleSample::stand_in`]); the keys fly
-/// beside it once it works. So a SpaceMouse plugged in while the workstation runs is taken up
-/// too, and one unplugged and plugged back in again.
-pub fn profile_for(hid: &[HidEntry]) -> FoundProfile {
+/// The default profile: [`Profile::desktop_default`] with the navigation role on any supported
+/// SpaceMouse, whether or not one is plugged in now. The hub opens one when it appears (its
+/// reopening backoff, at most `reconnect_max_s` apart), and until then the keyboard stands in
+/// for it ([`crate::devices::hub::RoleSample::stand_in`]); the keys fly beside it once it works.
+/// So a SpaceMouse plugged in while the workstation runs is taken up too, and one unplugged and
+/// plugged back in again. The profile does not depend on what is plugged in, so a session
+/// recorded with it names the same devices on every machine.
+pub fn default_profile() -> Profile {
     let mut profile = Profile::desktop_default();
     profile.name = "desktop+spacemouse".into();
     profile.description = "The desktop stand-ins, with any supported SpaceMouse flying the view \
@@ -80,10 +71,16 @@ pub fn profile_for(hid: &[HidEntry]) -> FoundProfile {
             rz: zone,
         };
     }
+    profile
+}
+
+/// One line for the user saying what [`default_profile`] finds among the HID devices `hid`
+/// (from [`crate::devices::enumerate::list_hid`]) at start.
+pub fn summary(hid: &[HidEntry]) -> String {
     let plugged_in = hid
         .iter()
         .find_map(|h| h.supported_model.as_deref().map(|m| (h, m)));
-    let summary = match plugged_in {
+    match plugged_in {
         Some((entry, model)) => format!(
             "devices: {model} ({:04x}:{:04x}) flies the view beside the keyboard, the desktop \
              mouse is the wand",
@@ -92,8 +89,7 @@ pub fn profile_for(hid: &[HidEntry]) -> FoundProfile {
         None => "devices: the desktop mouse and keyboard; no supported 3D mouse is plugged in \
                  (a SpaceMouse plugged in later flies the view; trackers need --profile)"
             .into(),
-    };
-    FoundProfile { profile, summary }
+    }
 }
 
 #[cfg(test)]
@@ -120,27 +116,20 @@ mod tests {
     }
 
     #[test]
-    fn with_nothing_supported_plugged_in_the_profile_waits_for_a_spacemouse() {
-        let (v, p) = supported();
-        let with_one = profile_for(&[hid(v, p)]);
+    fn with_nothing_supported_plugged_in_the_summary_says_a_later_one_flies() {
         for found in [vec![], vec![hid(0x1234, 0x5678), hid(0x046d, 0x0001)]] {
-            let got = profile_for(&found);
-            // The same profile as with one plugged in: the hub opens it when it appears.
-            assert_eq!(got.profile, with_one.profile);
+            let got = summary(&found);
             assert!(
-                got.summary.contains("desktop mouse and keyboard")
-                    && got.summary.contains("plugged in later"),
-                "{}",
-                got.summary
+                got.contains("desktop mouse and keyboard") && got.contains("plugged in later"),
+                "{got}"
             );
         }
     }
 
     #[test]
-    fn a_plugged_in_spacemouse_flies_the_view_and_the_desktop_keeps_head_and_wand() {
+    fn the_spacemouse_flies_the_view_and_the_desktop_keeps_head_and_wand() {
         let (v, p) = supported();
-        let got = profile_for(&[hid(0x1234, 0x5678), hid(v, p), hid(v, p)]);
-        let profile = &got.profile;
+        let profile = &default_profile();
         profile
             .validate(Path::new("found"))
             .expect("a valid profile");
@@ -160,13 +149,10 @@ mod tests {
         for role in [Role::Head, Role::Wand] {
             assert_eq!(profile.binding(role), desktop.binding(role), "{role:?}");
         }
+        let said = summary(&[hid(0x1234, 0x5678), hid(v, p), hid(v, p)]);
         let model = match_hid(v, p).expect("supported").1;
-        assert!(got.summary.contains(model), "{}", got.summary);
-        assert!(
-            got.summary.contains(&format!("{v:04x}:{p:04x}")),
-            "{}",
-            got.summary
-        );
+        assert!(said.contains(model), "{said}");
+        assert!(said.contains(&format!("{v:04x}:{p:04x}")), "{said}");
         // It is an ordinary profile: written out, it reads back the same.
         let text = profile.to_toml().expect("toml");
         assert_eq!(

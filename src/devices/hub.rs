@@ -1447,7 +1447,7 @@ mod tests {
 
     #[test]
     fn the_default_profile_takes_up_a_spacemouse_plugged_in_after_start() {
-        let mut profile = crate::devices::found::profile_for(&[]).profile;
+        let mut profile = crate::devices::found::default_profile();
         let spacemouse = profile
             .device_index(crate::devices::found::SPACEMOUSE_DEVICE)
             .expect("a SpaceMouse entry");
