@@ -721,6 +721,7 @@ impl Hub {
                     let reader = Reader {
                         shared: Arc::clone(&shared),
                         index,
+                        name: spec.name.clone(),
                         protocol,
                         init: InitSettings {
                             decoder: spec.decoder.clone(),
@@ -824,6 +825,8 @@ impl Drop for Hub {
 struct Reader {
     shared: Arc<Shared>,
     index: usize,
+    /// The device's name in the profile, for the log.
+    name: String,
     protocol: crate::devices::protocol::Protocol,
     init: InitSettings,
     reconnect_min: Duration,
@@ -855,13 +858,7 @@ impl Reader {
         let index = self.index;
         let repeated = last_error.as_deref() == Some(error);
         if !repeated {
-            let name = lock(&self.shared.state)
-                .profile()
-                .devices
-                .get(index)
-                .map(|d| d.name.clone())
-                .unwrap_or_default();
-            tracing::warn!("device {index} ({name}): {error}");
+            tracing::warn!("device {index} ({}): {error}", self.name);
             *last_error = Some(error.to_string());
         }
         if !repeated || was_opened {
@@ -1400,37 +1397,16 @@ mod tests {
         );
     }
 
-    /// Opens fine, never answers.
-    struct Silent;
+    /// A device that opens fine and sends the same bytes every millisecond: none (it never
+    /// answers), or a report (a SpaceMouse held off its centre).
+    struct Repeating(Vec<u8>);
 
-    impl Transport for Silent {
-        fn read(
-            &mut self,
-            _buf: &mut [u8],
-        ) -> Result<usize, crate::devices::transport::TransportError> {
-            std::thread::sleep(Duration::from_millis(1));
-            Ok(0)
-        }
-        fn write(
-            &mut self,
-            _bytes: &[u8],
-        ) -> Result<(), crate::devices::transport::TransportError> {
-            Ok(())
-        }
-        fn describe(&self) -> String {
-            "silent".into()
-        }
-    }
-
-    /// A SpaceMouse held off its centre: a combined report every 2 ms.
-    struct HeldSpaceMouse(Vec<u8>);
-
-    impl Transport for HeldSpaceMouse {
+    impl Transport for Repeating {
         fn read(
             &mut self,
             buf: &mut [u8],
         ) -> Result<usize, crate::devices::transport::TransportError> {
-            std::thread::sleep(Duration::from_millis(2));
+            std::thread::sleep(Duration::from_millis(1));
             buf[..self.0.len()].copy_from_slice(&self.0);
             Ok(self.0.len())
         }
@@ -1441,7 +1417,7 @@ mod tests {
             Ok(())
         }
         fn describe(&self) -> String {
-            "held spacemouse".into()
+            "repeating".into()
         }
     }
 
@@ -1467,7 +1443,7 @@ mod tests {
                 }
                 let report =
                     crate::devices::encode::spacemouse_hid::combined_report([0, 0, 0, 0, 300, 0]);
-                Ok(Box::new(HeldSpaceMouse(report)) as Box<dyn Transport>)
+                Ok(Box::new(Repeating(report)) as Box<dyn Transport>)
             }
         }));
         let mut openers: Openers = profile.devices.iter().map(|_| None).collect();
@@ -1526,7 +1502,7 @@ mod tests {
         profile.devices[0].driver.reconnect_min_s = 0.005;
         profile.devices[0].driver.reconnect_max_s = 0.01;
         let opener: Box<dyn Opener> = Box::new(FnOpener::new("silent", || {
-            Ok(Box::new(Silent) as Box<dyn Transport>)
+            Ok(Box::new(Repeating(Vec::new())) as Box<dyn Transport>)
         }));
         let hub = Hub::start_with(
             profile,
