@@ -582,6 +582,13 @@ fn datagram_x(bytes: &[u8]) -> f64 {
     f64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"))
 }
 
+/// What a command that must fail said on standard error (it fails the test if it succeeded).
+fn refusal(output: std::process::Output) -> String {
+    let err = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(!output.status.success(), "succeeded: {err}");
+    err
+}
+
 /// Runs `leman record --recover FROM --out OUT`.
 fn record_recover(from: &Path, out: &Path) -> std::process::Output {
     leman()
@@ -748,15 +755,15 @@ fn record_command_names_the_profile_file_and_field_on_errors() {
         "version = 1\nname = \"x\"\n[[device]]\nname = \"d\"\nprotocol = \"desktop\"\n[[role]]\nrole = \"head\"\ndevice = \"nope\"\n",
     )
     .expect("write");
-    let out = leman()
-        .args(["record", "--profile"])
-        .arg(&bad)
-        .args(["--out"])
-        .arg(dir.path().join("x.session"))
-        .output()
-        .expect("run");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = refusal(
+        leman()
+            .args(["record", "--profile"])
+            .arg(&bad)
+            .args(["--out"])
+            .arg(dir.path().join("x.session"))
+            .output()
+            .expect("run"),
+    );
     assert!(
         err.contains("bad.toml") && err.contains("role[0].device"),
         "{err}"
@@ -847,9 +854,7 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
     let first_take = Session::load(&out).expect("the first take loads");
 
     // The same command again is refused before anything opens; the first take stays.
-    let again = record_briefly(&out, &[]);
-    assert!(!again.status.success());
-    let err = stderr(&again);
+    let err = refusal(record_briefly(&out, &[]));
     assert!(
         err.contains("take.session")
             && err.contains("already exists")
@@ -875,9 +880,7 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
     let cut = &take_one[..end_line];
     std::fs::write(&partial, cut).expect("write partial");
     for extra in [&[][..], &["--overwrite"][..]] {
-        let refused = record_briefly(&out, extra);
-        assert!(!refused.status.success());
-        let err = stderr(&refused);
+        let err = refusal(record_briefly(&out, extra));
         assert!(
             err.contains(".take.session.partial") && err.contains("--recover"),
             "{extra:?}: {err}"
@@ -888,13 +891,8 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
     std::fs::write(&out, &take_one).expect("put the take back");
 
     // Recovering into an existing file is refused too, and done with --overwrite.
-    let recovered = record_recover(&partial, &out);
-    assert!(!recovered.status.success());
-    assert!(
-        stderr(&recovered).contains("already exists"),
-        "{}",
-        stderr(&recovered)
-    );
+    let err = refusal(record_recover(&partial, &out));
+    assert!(err.contains("already exists"), "{err}");
     let recovered = leman()
         .args(["record", "--overwrite", "--recover"])
         .arg(&partial)
@@ -912,16 +910,17 @@ fn record_never_writes_over_a_session_or_a_partial_file_unasked() {
 fn record_refuses_a_profile_of_only_the_desktop_stand_ins() {
     let dir = tempfile::tempdir().expect("tempdir");
     let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/desktop.toml");
-    let run = leman()
-        .args(["record", "--profile"])
-        .arg(&profile)
-        .arg("--out")
-        .arg(dir.path().join("d.session"))
-        .args(["--seconds", "0.2"])
-        .output()
-        .expect("run leman record");
-    assert!(!run.status.success());
-    let err = String::from_utf8_lossy(&run.stderr);
+    let record = |profile: &Path, out: &str| {
+        leman()
+            .args(["record", "--profile"])
+            .arg(profile)
+            .arg("--out")
+            .arg(dir.path().join(out))
+            .args(["--seconds", "0.2"])
+            .output()
+            .expect("run leman record")
+    };
+    let err = refusal(record(&profile, "d.session"));
     assert!(
         err.contains("desktop.toml") && err.contains("opens no window"),
         "{err}"
@@ -934,15 +933,7 @@ fn record_refuses_a_profile_of_only_the_desktop_stand_ins() {
     // A profile without devices is refused as such.
     let empty = dir.path().join("empty.toml");
     std::fs::write(&empty, "version = 1\nname = \"empty\"\n").expect("write");
-    let run = leman()
-        .args(["record", "--profile"])
-        .arg(&empty)
-        .arg("--out")
-        .arg(dir.path().join("e.session"))
-        .output()
-        .expect("run leman record");
-    assert!(!run.status.success());
-    let err = String::from_utf8_lossy(&run.stderr);
+    let err = refusal(record(&empty, "e.session"));
     assert!(
         err.contains("empty.toml") && err.contains("no devices"),
         "{err}"
