@@ -154,7 +154,8 @@ fn run_window_sized(
     if let Err(e) = &model {
         eprintln!("warning: the skin will not be simulated: {e}");
     }
-    // A replay in the window runs on its own clock, advanced in real time by the frames.
+    // A replay in the window runs on its own clock, advanced in real time by the frames. A
+    // recording hub is kept here too, to finish the session once the window has closed.
     let mut recording_hub = None;
     let (devices, replay_clock): (Box<dyn DeviceSource>, Option<VirtualClock>) = match replay {
         Some(session) => {
@@ -165,17 +166,15 @@ fn run_window_sized(
         None => {
             let profile = profile.unwrap_or_else(Profile::desktop_default);
             let recording = record_to.is_some();
-            let hub = Hub::start(
-                profile,
-                Arc::new(RealClock::new()),
-                HubOptions { record_to },
-            )
-            .context("starting the device hub")?;
-            let hub = Arc::new(hub);
-            if recording {
-                // Kept here too, to finish the session once the window has closed.
-                recording_hub = Some(Arc::clone(&hub));
-            }
+            let hub = Arc::new(
+                Hub::start(
+                    profile,
+                    Arc::new(RealClock::new()),
+                    HubOptions { record_to },
+                )
+                .context("starting the device hub")?,
+            );
+            recording_hub = recording.then(|| Arc::clone(&hub));
             (Box::new(SharedHub(hub)), None)
         }
     };
