@@ -169,7 +169,8 @@ impl RoleSample {
 }
 
 /// The desktop device's samples for every role as the default desktop profile binds them
-/// (whatever the profile binds), for [`RoleSample::stand_in`].
+/// (whatever the profile binds), for [`RoleSample::stand_in`]; kept only when the profile has a
+/// desktop device and some role that takes a stand-in is bound elsewhere or not at all.
 struct StandIns {
     /// Index of the profile's desktop device.
     device: usize,
@@ -285,15 +286,25 @@ impl HubState {
             .iter()
             .position(|d| d.protocol == DeviceKind::Desktop)
             .map(|i| (i, DesktopDevice::new(profile.devices[i].desktop.clone())));
-        let stand_ins = desktop.as_ref().map(|(device, _)| StandIns {
-            device: *device,
-            roles: Role::ALL.map(|role| RoleSample {
-                device: Some(*device),
-                stand_in: true,
-                ..RoleSample::empty(role)
-            }),
-            bindings: Profile::desktop_default().roles,
-        });
+        // Only when some role that takes a stand-in is not the desktop's own (with every such
+        // role bound to the desktop, as in the desktop default, its events would be mapped
+        // twice for samples nobody reads).
+        let stand_ins = desktop
+            .as_ref()
+            .filter(|(device, _)| {
+                Role::ALL
+                    .iter()
+                    .any(|&r| takes_stand_in(r) && roles[r.index()].device != Some(*device))
+            })
+            .map(|(device, _)| StandIns {
+                device: *device,
+                roles: Role::ALL.map(|role| RoleSample {
+                    device: Some(*device),
+                    stand_in: true,
+                    ..RoleSample::empty(role)
+                }),
+                bindings: Profile::desktop_default().roles,
+            });
         Self {
             profile,
             roles,
@@ -1334,6 +1345,21 @@ mod tests {
             head.pose.expect("the head's last pose").position_m.x,
             0.1,
             "a lost head tracker's last pose is kept"
+        );
+    }
+
+    #[test]
+    fn stand_ins_are_kept_only_for_roles_the_desktop_does_not_serve() {
+        assert!(
+            HubState::new(Profile::desktop_default())
+                .stand_ins
+                .is_none()
+        );
+        assert!(HubState::new(tracked_profile()).stand_ins.is_some());
+        assert!(
+            HubState::new(crate::devices::found::default_profile())
+                .stand_ins
+                .is_some()
         );
     }
 
