@@ -373,7 +373,7 @@ fn the_devices_panel_says_why_a_device_is_lost() {
     use leman::devices::session::Record;
     let found = leman::devices::found::default_profile();
     let spacemouse = found
-        .device_index("spacemouse")
+        .device_index(leman::devices::found::SPACEMOUSE_DEVICE)
         .expect("a SpaceMouse entry");
     let error = "cannot open hid any:any: no such HID device is plugged in";
     let mut session = Session::new(found);
